@@ -1,0 +1,30 @@
+"""Where particles are after a step: outside the grid, or outside the rank's slab."""
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = ["count_strays", "cell_columns"]
+
+
+@nb.njit(cache=True)
+def count_strays(x, origin, inv_h, ncx, ncy, axis, c0, c1):
+    """Count particles outside the grid and, of the rest, those whose cell column along
+    ``axis`` is outside the owned columns [c0, c1). Non-finite positions count as outside."""
+    outside = 0
+    leaving = 0
+    for p in range(x.shape[0]):
+        sx = (x[p, 0] - origin[0]) * inv_h
+        sy = (x[p, 1] - origin[1]) * inv_h
+        if not (0.0 <= sx < ncx and 0.0 <= sy < ncy):
+            outside += 1
+            continue
+        c = int(math.floor(sx if axis == 0 else sy))
+        if c < c0 or c >= c1:
+            leaving += 1
+    return outside, leaving
+
+
+def cell_columns(x, origin, inv_h, axis):
+    """Cell column index of each particle along ``axis`` (numpy; used only when needed)."""
+    return np.floor((x[:, axis] - origin[axis]) * inv_h).astype(np.int64)

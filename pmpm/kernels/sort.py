@@ -1,0 +1,35 @@
+"""Counting sort of particles by cell: neighbours in memory touch neighbouring grid nodes."""
+import numba as nb
+import numpy as np
+
+__all__ = ["cell_order"]
+
+
+@nb.njit(cache=True)
+def cell_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
+    """Permutation that orders particles by cell (row-major over the window's cells
+    [i_lo, i_hi) x [j_lo, j_hi)), stable within a cell. Particles outside are put last."""
+    n = x.shape[0]
+    ny = j_hi - j_lo
+    ncell = (i_hi - i_lo) * ny
+    key = np.empty(n, dtype=np.int64)
+    count = np.zeros(ncell + 1, dtype=np.int64)
+    for p in range(n):
+        i = int(np.floor((x[p, 0] - origin[0]) * inv_h)) - i_lo
+        j = int(np.floor((x[p, 1] - origin[1]) * inv_h)) - j_lo
+        k = ncell
+        if 0 <= i < i_hi - i_lo and 0 <= j < ny:
+            k = i * ny + j
+        key[p] = k
+        count[k] += 1
+    start = np.zeros(ncell + 1, dtype=np.int64)
+    acc = 0
+    for k in range(ncell + 1):
+        start[k] = acc
+        acc += count[k]
+    order = np.empty(n, dtype=np.int64)
+    for p in range(n):
+        k = key[p]
+        order[start[k]] = p
+        start[k] += 1
+    return order

@@ -1,0 +1,76 @@
+"""External loads a scene asks for: gravity and total forces on particle sets.
+
+A force set is the particles whose initial position lies in a box; the set's total force
+(scaled by its time function) is shared among them by mass. Each particle belongs to at most
+one set, recorded in its ``load_id`` / ``load_w`` fields (they exist only when the scene has
+forces, and migrate with the particle). With no loads the kernels receive ``None`` and compile
+without the code.
+"""
+import logging
+
+import numpy as np
+
+from .errors import ConfigError
+from .timefunctions import evaluate
+
+__all__ = ["Loads"]
+logger = logging.getLogger(__name__)
+
+
+def _in_box(x, lower, upper):
+    return np.all((x >= np.asarray(lower)) & (x <= np.asarray(upper)), axis=1)
+
+
+class Loads:
+    """Gravity vector and force sets of a scene.
+
+    Parameters
+    ----------
+    config : LoadsConfig
+    """
+
+    def __init__(self, config):
+        self.config = config
+        self.gravity = None if config.gravity is None else np.asarray(config.gravity, dtype=np.float64)
+        self.forces = config.forces
+        self._vec = np.zeros((len(self.forces), 2))
+
+    @property
+    def has_forces(self):
+        return bool(self.forces)
+
+    def describe(self):
+        """Effect lines for the start-up log."""
+        out = []
+        if self.gravity is not None:
+            out.append(f"gravity {tuple(self.gravity)}")
+        for f in self.forces:
+            out.append(f"force {f.name!r}: {f.force} N, {f.time_function['type']}")
+        return out
+
+    def assign(self, fields, allreduce_sum):
+        """Add ``load_id``/``load_w`` to the particle ``fields`` (all ranks call it)."""
+        if not self.forces:
+            return
+        x0, m = fields["x0"], fields["m"]
+        load_id = np.full(len(m), -1, dtype=np.int32)
+        load_w = np.zeros(len(m))
+        for k, f in enumerate(self.forces):
+            sel = _in_box(x0, f.lower, f.upper)
+            if np.any(sel & (load_id >= 0)):
+                other = self.forces[load_id[np.argmax(sel & (load_id >= 0))]].name
+                raise ConfigError(f"loads.forces[{k}]", f"box overlaps force {other!r} (a particle takes one set)")
+            total = allreduce_sum(float(m[sel].sum()))
+            if total <= 0:
+                raise ConfigError(f"loads.forces[{k}]", "box selects no particle")
+            load_id[sel] = k
+            load_w[sel] = m[sel] / total
+        fields["load_id"], fields["load_w"] = load_id, load_w
+
+    def kernel_args(self, particles, t):
+        """(gravity, load_id, load_w, load_vec) for the kernels at time ``t``; absent -> None."""
+        if not self.forces:
+            return self.gravity, None, None, None
+        for k, f in enumerate(self.forces):
+            self._vec[k] = np.asarray(f.force) * evaluate(f.time_function, t)
+        return self.gravity, particles["load_id"], particles["load_w"], self._vec

@@ -1,0 +1,104 @@
+"""B-spline shape functions on the background grid, one axis at a time.
+
+Each function takes the particle coordinate in cell units ``s = (x - origin) / h`` along one
+axis and the number of cells ``n`` along that axis, and returns
+
+    start, (w_0 .. w_{K-1}), (g_0 .. g_{K-1})
+
+the first global node index of the particle's support, the weights of nodes ``start + k`` and
+their derivatives in cell units (the caller multiplies by 1/h). The 2-D weight of node
+(start_x + a, start_y + b) is ``wx[a] * wy[b]``; its gradient is ``(gx[a] wy[b], wx[a] gy[b]) / h``.
+
+Grid edges use boundary-modified B-splines (Steffen, Kirby & Berzins 2008): the spline is built
+on a lattice extended by one ghost node beyond each edge, and the ghost node is eliminated by
+linear extrapolation from the two nearest real nodes (v_ghost = 2 v_edge - v_inner). Its weight
+therefore moves onto the edge node (x2) and the inner node (x-1). This keeps the partition of
+unity and linear completeness for every particle in the grid, makes the basis interpolatory at
+the edge (a fixed edge node fixes the material there exactly), and never indexes outside the
+grid. For the cubic spline the result is exactly Steffen's modified cubic B-spline.
+
+K (the stencil width) is 2 (linear), 3 (quadratic) and 4 (cubic); the ghost width a slab needs
+is 1, 2 and 2 node columns (a particle in cell c touches nodes c-1 .. c+2 at most).
+"""
+import math
+
+import numba as nb
+
+__all__ = ["SHAPES", "linear", "quadratic", "cubic", "ghost_width", "min_cells"]
+
+
+@nb.njit(cache=True, inline="always")
+def linear(s, n):
+    """Linear hat functions (the classic MPM basis): 2 nodes per axis."""
+    c = min(max(int(math.floor(s)), 0), n - 1)
+    f = s - c
+    return c, (1.0 - f, f), (-1.0, 1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def _quad(xi):
+    a = abs(xi)
+    if a < 0.5:
+        return 0.75 - xi * xi, -2.0 * xi
+    if a < 1.5:
+        t = 1.5 - a
+        return 0.5 * t * t, -t if xi > 0 else t
+    return 0.0, 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def quadratic(s, n):
+    """Quadratic B-splines centred on nodes: 3 nodes per axis, boundary-modified at the edges."""
+    c = int(math.floor(s + 0.5))
+    w0, g0 = _quad(s - (c - 1))
+    w1, g1 = _quad(s - c)
+    w2, g2 = _quad(s - (c + 1))
+    if c - 1 < 0:  # ghost node -1 -> 2x onto node 0, -1x onto node 1
+        return 0, (w1 + 2 * w0, w2 - w0, 0.0), (g1 + 2 * g0, g2 - g0, 0.0)
+    if c + 1 > n:  # ghost node n+1 -> 2x onto node n, -1x onto node n-1
+        return n - 2, (0.0, w0 - w2, w1 + 2 * w2), (0.0, g0 - g2, g1 + 2 * g2)
+    return c - 1, (w0, w1, w2), (g0, g1, g2)
+
+
+@nb.njit(cache=True, inline="always")
+def _cubic(xi):
+    a = abs(xi)
+    if a < 1.0:
+        w = 0.5 * a * a * a - a * a + 2.0 / 3.0
+        g = 1.5 * a * a - 2.0 * a
+    elif a < 2.0:
+        t = 2.0 - a
+        w = t * t * t / 6.0
+        g = -0.5 * t * t
+    else:
+        return 0.0, 0.0
+    return w, g if xi >= 0 else -g
+
+
+@nb.njit(cache=True, inline="always")
+def cubic(s, n):
+    """Cubic B-splines (the paper's choice): 4 nodes per axis, boundary-modified at the edges."""
+    c = int(math.floor(s))
+    w0, g0 = _cubic(s - (c - 1))
+    w1, g1 = _cubic(s - c)
+    w2, g2 = _cubic(s - (c + 1))
+    w3, g3 = _cubic(s - (c + 2))
+    if c - 1 < 0:
+        return 0, (w1 + 2 * w0, w2 - w0, w3, 0.0), (g1 + 2 * g0, g2 - g0, g3, 0.0)
+    if c + 2 > n:
+        return n - 3, (0.0, w0, w1 - w3, w2 + 2 * w3), (0.0, g0, g1 - g3, g2 + 2 * g3)
+    return c - 1, (w0, w1, w2, w3), (g0, g1, g2, g3)
+
+
+#: name in the scene -> kernel
+SHAPES = {"linear": linear, "quadratic": quadratic, "cubic": cubic}
+
+
+def ghost_width(name):
+    """Node columns a slab must borrow from each neighbour for this basis."""
+    return {"linear": 1, "quadratic": 2, "cubic": 2}[name]
+
+
+def min_cells(name):
+    """Fewest cells per axis for which the boundary modification is well defined."""
+    return {"linear": 1, "quadratic": 2, "cubic": 3}[name]

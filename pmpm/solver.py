@@ -1,0 +1,277 @@
+"""The explicit MPM solver: owns the grid window, particles, materials, scheme and loads.
+
+One step (paper section 3, steps 1-10) is the scheme's ordered list of phases, each a short
+method here that calls one numba kernel or one exchange::
+
+    reset_grid -> particles_to_grid -> exchange_halo -> update_grid -> grid_to_particles
+    -> [MUSL: exchange_halo (re-map) -> grid_velocity] -> update_strain -> update_stress
+    -> migrate -> next time step
+
+The serial run is the one-rank case of the same code: the halo exchange and the migration are
+no-ops there, nothing else changes.
+"""
+import logging
+import math
+import time
+
+import numpy as np
+
+from decomposition import alltoallv_fields, get_comm
+from . import kernels as K
+from .boundary import apply_boundary_masks, check_boundaries
+from .errors import ParticleExitError, UnstableRunError
+from .grid import Grid, GridWindow
+from .loads import Loads
+from .materials import make_material
+from .schemes import make_scheme
+from .setup_particles import choose_axis, create_particles, make_decomposition
+from .shape import SHAPES, ghost_width, min_cells
+from .errors import ConfigError
+
+__all__ = ["Solver"]
+logger = logging.getLogger(__name__)
+
+
+class Solver:
+    """Explicit MPM on the ranks of ``comm`` (``None``: COMM_WORLD).
+
+    Parameters
+    ----------
+    scene : pmpm.config.Scene
+    comm : mpi4py communicator, optional
+    """
+
+    def __init__(self, scene, comm=None):
+        self.scene = scene
+        self.comm = get_comm(comm)
+        cfg = scene.solver
+        self.grid = Grid(scene.grid.origin, scene.grid.cell_size, scene.grid.cells)
+        if min(self.grid.cells) < min_cells(cfg.shape_function):
+            raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines need at least "
+                                            f"{min_cells(cfg.shape_function)} cells per axis")
+        self.shape = SHAPES[cfg.shape_function]
+        self.labels = list(scene.materials)
+        self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
+                          for k in self.labels]
+        self.scheme = make_scheme(cfg.scheme)
+        self.loads = Loads(scene.loads)
+        check_boundaries(scene.boundaries, self.grid)
+        everything = create_particles(scene, self.grid, self.materials, self.labels)
+        self.n_total = everything.n
+        self.axis = choose_axis(scene.parallel.axis, self.grid)
+        self.decomp = make_decomposition(self.comm, self.grid, self.axis,
+                                         ghost_width(cfg.shape_function), everything["x"])
+        self.particles = everything.take(self._owned(everything["x"]))
+        self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
+        self._build_window()
+        self.wave_speed = max(m.wave_speed() for m in self.materials)
+        self.mass_cutoff = cfg.mass_cutoff * self.decomp.allreduce_max(
+            float(self.particles["m"].max()) if self.particles.n else 0.0)
+        self.t = 0.0
+        self.step_count = 0
+        self.external_work = 0.0   # this rank's share; summed when reported
+        self.removed = 0
+        self.vmax = self.decomp.allreduce_max(self._local_speed())
+        self.dt = self.stable_dt(self.vmax)
+
+    # -- set-up helpers ---------------------------------------------------------------------
+    def _owned(self, x):
+        cols = K.cell_columns(x, self.grid.origin, self.grid.inv_h, self.axis)
+        return self.decomp.owner_of_columns(cols) == self.decomp.rank
+
+    def _build_window(self):
+        self.window = GridWindow(self.grid, self.axis, self.decomp.window)
+        apply_boundary_masks(self.window, self.scene.boundaries)
+
+    def _local_speed(self):
+        v = self.particles["v"]
+        return float(np.sqrt((v * v).sum(axis=1)).max()) if len(v) else 0.0
+
+    def stable_dt(self, vmax):
+        """CFL time step C h / (c + |v|max), or the scene's fixed step."""
+        if self.scene.solver.time_step is not None:
+            return self.scene.solver.time_step
+        return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
+
+    def critical_dt(self):
+        """The largest stable step by the CFL rule with C = 1 (for warnings and messages)."""
+        return self.grid.h / (self.wave_speed + self.vmax)
+
+    # -- arguments shared by the transfer kernels --------------------------------------------
+    def _geometry(self):
+        w, g = self.window, self.grid
+        return (w.G, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
+
+    def _scratch(self, name, shape):
+        arr = getattr(self, name, None)
+        if arr is None or arr.shape != shape:
+            arr = np.empty(shape)
+            setattr(self, name, arr)
+        return arr
+
+    # -- the phases --------------------------------------------------------------------------
+    def reset_grid(self):
+        """Step 1: zero the rank's grid window (owned and ghost nodes)."""
+        self.window.reset()
+
+    def particles_to_grid(self, momentum, forces):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
+        p = self.particles
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
+              gravity, load_id, load_w, load_vec, *self._geometry())
+
+    def exchange_halo(self, fields):
+        """HALO: ghost contributions summed into the owners, owners' totals copied back."""
+        view = self.window.G[..., fields]
+        self.decomp.accumulate(view)
+        self.decomp.fill(view)
+
+    def update_grid(self, dt):
+        """Steps 7-8 / eq. 3-4: (mv) += f dt, essential BCs; fields become v and dv."""
+        w = self.window
+        K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel, 0, w.shape[0], 0, w.shape[1])
+
+    def grid_velocity(self, source, target):
+        """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
+        w = self.window
+        K.momentum_to_velocity(w.G, source, target, self.mass_cutoff, w.bc_mask, w.bc_vel,
+                               0, w.shape[0], 0, w.shape[1])
+
+    def grid_to_particles(self, remap):
+        """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
+        p = self.particles
+        vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
+                                   *self._geometry(), remap)
+        self._vmax_local, self._bad_local = vmax, bad
+
+    def update_strain(self, dt, velocity_field, move=True):
+        """Step 10 / eq. 6: strain increment, volume update, and (``move``) positions."""
+        p = self.particles
+        de = self._scratch("_de", (p.n, 3))
+        dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
+        self._de, self._dw = de, dw
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        self.external_work += K.g2p_kinematics(
+            p["x"], p["m"], p["vol"], p["strain"], de, dw, velocity_field, move, dt,
+            gravity, load_id, load_w, load_vec, *self._geometry())
+
+    def move_particles(self, dt):
+        """Position update x += dt sum N v_i (USF: after the stress update)."""
+        p = self.particles
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        self.external_work += K.g2p_kinematics(
+            p["x"], p["m"], p["vol"], p["strain"], None, None, 1, True, dt,
+            gravity, load_id, load_w, load_vec, *self._geometry())
+
+    def update_stress(self):
+        """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
+        p = self.particles
+        if self._dw is not None:
+            K.jaumann_rotate(p["stress"], self._dw)
+        several = len(self.materials) > 1
+        for k, material in enumerate(self.materials):
+            state = {name: p[name] for name in material.state_fields}
+            if self._dw is not None:
+                for name in material.tensor_state_fields:
+                    K.jaumann_rotate(p[name], self._dw)
+            material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
+
+    # -- after the phases ---------------------------------------------------------------------
+    def _check_and_next_dt(self):
+        """One allreduce: the next time step (min over ranks) and every rank's troubles."""
+        g, d = self.grid, self.decomp
+        c0, c1 = d.owned
+        outside, leaving = K.count_strays(self.particles["x"], g.origin, g.inv_h, g.cells[0],
+                                          g.cells[1], self.axis, c0, min(c1, g.cells[self.axis]))
+        vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
+        bad = self._bad_local + (0 if math.isfinite(vmax) else 1)
+        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving], dtype=np.float64))
+        self.vmax = flags[0]
+        return int(flags[1]), int(flags[2]), int(flags[3])
+
+    def migrate(self, leaving):
+        """Step 11: particles that left the slab move to the neighbour with all their state."""
+        if leaving == 0:
+            return
+        p = self.particles
+        cols = K.cell_columns(p["x"], self.grid.origin, self.grid.inv_h, self.axis)
+        self.particles.fields = self.decomp.migrate(p.fields, self.decomp.owner_of_columns(cols))
+
+    def remove_outside(self):
+        """Drop particles that left the grid (scene: on_particle_exit = "remove")."""
+        keep = self.grid.inside(self.particles["x"])
+        self.removed += int(self.decomp.allreduce_sum(int((~keep).sum())))
+        self.particles = self.particles.take(keep)
+
+    def outside_report(self, limit=5):
+        """'id (x, y)' of particles outside the grid, from every rank (rank 0 gets the text)."""
+        p = self.particles
+        out = ~self.grid.inside(p["x"])
+        rows = [(int(i), float(x[0]), float(x[1])) for i, x in zip(p["id"][out][:limit], p["x"][out][:limit])]
+        rows = sum(self.comm.allgather(rows), [])[:limit]
+        return ", ".join(f"id {i} at ({x:.4g}, {y:.4g})" for i, x, y in rows)
+
+    def sort_particles(self):
+        """Order particles by cell so that neighbours in memory share grid nodes."""
+        w, g = self.window, self.grid
+        order = K.cell_order(self.particles["x"], g.origin, g.inv_h, w.ox, w.ox + w.shape[0],
+                             w.oy, w.oy + w.shape[1])
+        self.particles.reorder(order)
+
+    def rebalance(self):
+        """Move slab boundaries by the particle count per column if the imbalance is too big."""
+        par = self.scene.parallel
+        if par.rebalance_threshold is None or self.decomp.size == 1:
+            return False
+        if self.decomp.imbalance(self.particles.n) <= par.rebalance_threshold:
+            return False
+        cols = K.cell_columns(self.particles["x"], self.grid.origin, self.grid.inv_h, self.axis)
+        weights = np.bincount(cols, minlength=self.grid.nodes[self.axis]).astype(np.float64)
+        if not self.decomp.rebalance(self.decomp.allreduce_sum(weights)):
+            return False
+        dest = self.decomp.owner_of_columns(cols)
+        self.particles.fields = alltoallv_fields(self.comm, self.particles.fields, dest)
+        self._build_window()
+        return True
+
+    # -- one step ---------------------------------------------------------------------------
+    def step(self):
+        """Advance one time step; raises on instability or particles leaving the grid."""
+        cfg = self.scene.solver
+        if cfg.sort_interval and self.step_count % cfg.sort_interval == 0:
+            self.sort_particles()
+        dt = self.dt
+        self.scheme.advance(self, dt)
+        bad, outside, leaving = self._check_and_next_dt()
+        if bad:
+            raise UnstableRunError(f"non-finite particle velocity at t = {self.t + dt:.6g} s "
+                                   f"(step {self.step_count + 1}, dt = {dt:.3g} s; the stable step is "
+                                   f"about {self.critical_dt():.3g} s)")
+        if outside:
+            if cfg.on_particle_exit == "error":
+                raise ParticleExitError(f"{outside} particle(s) left the grid at t = {self.t + dt:.6g} s: "
+                                        f"{self.outside_report()}")
+            self.remove_outside()
+        self.migrate(leaving)
+        self.t += dt
+        self.step_count += 1
+        if self.step_count % self.scene.parallel.rebalance_interval == 0:
+            self.rebalance()
+        self.dt = self.stable_dt(self.vmax)
+        return dt
+
+    # -- reporting ----------------------------------------------------------------------------
+    def energies(self):
+        """Global kinetic, elastic strain, plastic work and external work (J)."""
+        p = self.particles
+        v = p["v"]
+        kinetic = 0.5 * float(np.sum(p["m"] * np.sum(v * v, axis=1)))
+        strain = 0.0
+        for k, material in enumerate(self.materials):
+            sel = p["mat"] == k
+            strain += float(np.sum(p["vol"][sel] * material.elastic_energy_density(p["stress"][sel])))
+        plastic = float(np.sum(p["vol"] * p["plastic_work"])) if "plastic_work" in p else 0.0
+        ke, se, pw, we = self.decomp.allreduce_sum(np.array([kinetic, strain, plastic, self.external_work]))
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "external_work": we,
+                "total": ke + se + pw}
