@@ -1,0 +1,25 @@
+"""pmpm: explicit dynamic Material Point Method for elastoplastic structures, over MPI.
+
+Public API::
+
+    from pmpm import load_scene, Solver, Run
+    scene = load_scene("cases/bar.toml")[0]
+    Run(scene).execute()
+"""
+__version__ = "0.1.0"
+
+__all__ = ["__version__", "load_scene", "Solver", "Run"]
+
+
+def __getattr__(name):
+    # lazy: `pmpm --help` and scene validation must not pay for numba compilation
+    if name == "load_scene":
+        from .config import load_scene
+        return load_scene
+    if name == "Solver":
+        from .solver import Solver
+        return Solver
+    if name == "Run":
+        from .run import Run
+        return Run
+    raise AttributeError(name)

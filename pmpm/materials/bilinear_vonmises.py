@@ -27,8 +27,9 @@ plane_stress
     nearly linear, converges in 2-4 iterations.
 plane_strain
     Classical radial return in 4 components (sxx, syy, sxy, szz): the deviatoric part of xi
-    scales by sigma_y / Phi_tr and d_lambda = (Phi_tr - sigma_y) / (c + 3 mu) in closed form; the
-    hydrostatic part of xi scales by 1 / (1 + k d_lambda) (Ziegler moves eta along all of xi).
+    scales by sigma_y / Phi_tr and d_lambda = (Phi_tr - sigma_y) / (c + 3 mu) in closed form.
+    As in ``smooth_vonmises``, Ziegler's rule acts on dev(xi) here, so eta stays deviatoric and
+    the pressure passes through unchanged.
 
 State: as ``smooth_vonmises`` (back_stress, eps_p, eps_p_eq = sum d_lambda, plastic_work =
 integral of sigma . d_eps_p, taken with the mean of the start and end stress of the increment,
@@ -78,14 +79,12 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
             dl = (phi_tr - sy) / (c + 3.0 * mu)
             mean = (xx + yy + zz) / 3.0
             fd = sy / phi_tr
-            fh = mean / (1.0 + k * dl)
-            xx = (xx - mean) * fd + fh
-            yy = (yy - mean) * fd + fh
-            zz = (zz - mean) * fd + fh
+            xx = (xx - mean) * fd
+            yy = (yy - mean) * fd
+            zz = (zz - mean) * fd
             xy = xy * fd
-            m = (xx + yy + zz) / 3.0
             f = 1.5 * dl / sy
-            dpxx, dpyy, dpxy, dpzz = f * (xx - m), f * (yy - m), 2.0 * f * xy, f * (zz - m)
+            dpxx, dpyy, dpxy, dpzz = f * xx, f * yy, 2.0 * f * xy, f * zz
         else:
             # invariants of the trial relative stress in the common eigenbasis of D and P
             a2 = 0.25 * (xx + yy) ** 2
@@ -114,12 +113,14 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
             f = dl / sy
             dpxx, dpyy, dpxy = f * (xx - 0.5 * yy), f * (yy - 0.5 * xx), 3.0 * f * xy
             dpzz = -(dpxx + dpyy)
+            mean = 0.0
+        # xx..zz hold dev(xi) in plane strain (the pressure is added back below), xi in plane stress
         g = k * dl
         bxx += g * xx
         byy += g * yy
         bxy += g * xy
         bzz += g * zz
-        nxx, nyy, nxy, nzz = xx + bxx, yy + byy, xy + bxy, zz + bzz
+        nxx, nyy, nxy, nzz = xx + bxx + mean, yy + byy + mean, xy + bxy, zz + bzz + mean
         work[p] += 0.5 * ((oxx + nxx) * dpxx + (oyy + nyy) * dpyy + (oxy + nxy) * dpxy
                           + (ozz + nzz) * dpzz)
         stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = nxx, nyy, nxy, nzz

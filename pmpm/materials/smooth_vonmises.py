@@ -18,9 +18,12 @@ plane_stress
     plane because s has no zz part).
 plane_strain
     The same equations with 4 components (sxx, syy, sxy, szz): 3D von Mises of s, 3D isotropic D
-    restricted to d_eps_zz = 0, and G = c s / Phi0 on the full 4-component s (so eta may carry a
-    hydrostatic part; von Mises ignores it, it only enters H2 through s . d_eps). For a deviatoric
-    n, D n = 2 mu n and n^T D n = 3 mu, which is why this version costs no more than plane stress.
+    restricted to d_eps_zz = 0, and s replaced by its deviator in H2 and in G. With the full s the
+    pressure, to which von Mises is blind, dominates s . d_eps and switches plasticity off under
+    confinement: a biaxial plane-strain path then drove Phi to almost 5 sigma_y. With dev(s),
+    sign(dev(s) . d_eps) = sign(n^T D d_eps), the consistent loading test, and eta stays deviatoric
+    (Ziegler on dev(s) is Prager's rule here). For a deviatoric n, D n = 2 mu n and
+    n^T D n = 3 mu, so this version costs no more than plane stress.
 
 Known properties of the model as written (not defects of the integration)
 --------------------------------------------------------------------------
@@ -29,9 +32,11 @@ Known properties of the model as written (not defects of the integration)
   instead of c. At steel values (nu = 0.3, alpha = 0.05, N = 10) the two laws differ by about
   0.1 % of the peak stress in the elastic-plastic transition; the yield plateau and the
   post-yield tangent alpha E are the same.
-- H2 tests s . d_eps, not n^T D d_eps, so on strongly non-proportional paths d_lambda can be
-  negative or Phi can grow above Phi0 while H2 = 0; the next loading increment (H1 > 1) pulls
-  it back.
+- In plane stress H2 tests s . d_eps (as design.md writes it), not n^T D d_eps, and the two
+  can differ in sign on non-proportional paths: then d_lambda < 0, or Phi grows past Phi0
+  elastically while H2 = 0 until a loading increment (H1 > 1) pulls it back. Proportional and
+  shear-reversal paths are unaffected; tension followed by combined shear-compression went
+  about 1 % past Phi0. In the continuous model with a consistent H2, Phi never exceeds Phi0.
 
 State
 -----
@@ -94,10 +99,14 @@ def smooth_rate(plane_strain, E, nu, sy, N, c,
     txy = sxy - bxy
     tz = szz - bzz
     if plane_strain:
-        phi2 = 0.5 * ((tx - ty) ** 2 + (ty - tz) ** 2 + (tz - tx) ** 2) + 3.0 * txy * txy
+        mean = (tx + ty + tz) / 3.0
+        tx -= mean
+        ty -= mean
+        tz -= mean
+        phi2 = 1.5 * (tx * tx + ty * ty + tz * tz) + 3.0 * txy * txy
     else:
         phi2 = tx * tx - tx * ty + ty * ty + 3.0 * txy * txy
-    load = tx * dexx + ty * deyy + txy * dgxy  # s . d_eps; d_eps_zz = 0 or szz = 0
+    load = tx * dexx + ty * deyy + txy * dgxy  # s . d_eps (dev(s) in plane strain); d_eps_zz = 0
     floor = _PHI_FLOOR * sy
     if load < 0.0 or phi2 <= floor * floor:
         return (ds[0], ds[1], ds[2], ds[3], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -106,10 +115,9 @@ def smooth_rate(plane_strain, E, nu, sy, N, c,
     h1 = (phi2 / (sy * sy)) ** (0.5 * N)  # one pow, no extra sqrt
     inv = 1.0 / phi
     if plane_strain:
-        mean = (tx + ty + tz) / 3.0
-        nxx = 1.5 * (tx - mean) * inv
-        nyy = 1.5 * (ty - mean) * inv
-        nzz = 1.5 * (tz - mean) * inv
+        nxx = 1.5 * tx * inv
+        nyy = 1.5 * ty * inv
+        nzz = 1.5 * tz * inv
         nxy = 3.0 * txy * inv
         mu = E / (2.0 * (1.0 + nu))
         dnxx = 2.0 * mu * nxx
@@ -128,11 +136,21 @@ def smooth_rate(plane_strain, E, nu, sy, N, c,
         dnzz = 0.0
         ndn = nxx * dnxx + nyy * dnyy + nxy * dnxy
     ndg = c * phi / sy  # n . G = c (n . s) / Phi0 and n . s = Phi (Phi is 1-homogeneous)
+    # tx..tz hold dev(s) in plane strain, so G (and eta) stay deviatoric there
     dl = h1 * h2 * (dnxx * dexx + dnyy * deyy + dnxy * dgxy) / (ndn + ndg)
     g = dl * c / sy
     return (ds[0] - dl * dnxx, ds[1] - dl * dnyy, ds[2] - dl * dnxy, ds[3] - dl * dnzz,
             g * tx, g * ty, g * txy, g * tz,
             dl * nxx, dl * nyy, dl * nxy, dl)
+
+
+@nb.njit(cache=True, inline="always")
+def _load(plane_strain, tx, ty, txy, tz, dexx, deyy, dgxy):
+    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain)."""
+    if plane_strain:
+        mean = (tx + ty + tz) / 3.0
+        return (tx - mean) * dexx + (ty - mean) * deyy + txy * dgxy
+    return tx * dexx + ty * deyy + txy * dgxy
 
 
 @nb.njit(cache=True)
@@ -156,9 +174,11 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
         eq = eps_eq[p]
         w = work[p]
         dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
-        work_de = dse[0] * dexx + dse[1] * deyy + dse[2] * dgxy  # d_eps . D d_eps > 0
+        # growth of the loading indicator over an elastic half step: d_eps . D d_eps >= 0
+        # (its deviatoric part 2 mu dev(d_eps) . d_eps >= 0 in plane strain)
+        work_de = _load(plane_strain, dse[0], dse[1], dse[2], dse[3], dexx, deyy, dgxy)
         for _ in range(nsub):
-            load = (sxx - bxx) * dexx + (syy - byy) * deyy + (sxy - bxy) * dgxy
+            load = _load(plane_strain, sxx - bxx, syy - byy, sxy - bxy, szz - bzz, dexx, deyy, dgxy)
             if load + 0.5 * work_de < 0.0:
                 # s . d_eps < 0 at the start and at the elastic midpoint (it grows by
                 # 0.5 d_eps . D d_eps): both stages are elastic, so the step is exactly D d_eps.

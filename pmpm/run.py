@@ -1,0 +1,247 @@
+"""A run of a scene: the solver plus output, histories, progress, checkpoints and failure.
+
+``Run(scene).execute()`` steps the solver to the end time and writes one HDF5 file (frames of
+particle fields, time histories of the tracked points, energies), an XDMF sidecar for ParaView,
+CSV histories and plots. A run that goes unstable, or whose particles leave the grid, stops on
+every rank with a message, writes a checkpoint of its last good state and exits non-zero.
+"""
+import json
+import logging
+import os
+import time
+
+import numpy as np
+
+from . import __version__
+from .errors import ParticleExitError, UnstableRunError
+from .solver import Solver
+from .tracking import HISTORY_COLUMNS, Tracker
+
+__all__ = ["Run", "output_path"]
+logger = logging.getLogger(__name__)
+
+ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "external_work", "total")
+
+
+def output_path(scene):
+    """``<output.directory>/<stem>[_<variant>].h5``."""
+    name = scene.stem + (f"_{scene.variant}" if scene.variant else "")
+    return os.path.join(scene.output.directory, name + ".h5")
+
+
+class _Snapshot:
+    """A copy of the particle state a few steps back: what a failed run saves."""
+
+    def __init__(self, solver):
+        self.fields = {k: a.copy() for k, a in solver.particles.fields.items()}
+        self.t, self.step, self.dt = solver.t, solver.step_count, solver.dt
+        self.external_work = solver.external_work
+
+
+class Run:
+    """One scene run on the ranks of ``comm``.
+
+    Parameters
+    ----------
+    scene : Scene
+    comm : communicator, optional
+    write : bool
+        False runs without any file output (benchmarks, some tests).
+    restart : str, optional
+        Output file of an earlier run whose newest checkpoint to continue from.
+    """
+
+    def __init__(self, scene, comm=None, write=True, restart=None, snapshot_every=50):
+        self.scene = scene
+        self.solver = Solver(scene, comm)
+        self.comm = self.solver.comm
+        self.rank = self.comm.Get_rank()
+        self.write = write
+        self.path = output_path(scene)
+        self.snapshot_every = snapshot_every
+        self.restarted_from = None
+        if restart:
+            self._restore(restart)
+        self.tracker = Tracker(scene.output.track, self.solver)
+        self.output = self._open_output() if write else None
+        self.history_t, self.history_rows, self.energy_rows = [], [], []
+        self.initial_energy = None
+
+    # -- files ------------------------------------------------------------------------------
+    def _frame_fields(self):
+        p = self.solver.particles
+        names = ["id"] + [f for f in self.scene.output.fields if f in p and f != "id"]
+        return {f: (p[f].shape[1:], p[f].dtype) for f in names}
+
+    def _open_output(self):
+        from .io import OutputFile
+        if self.rank == 0:
+            os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
+        self.comm.Barrier()
+        attrs = {"scene": json.dumps(self.scene.to_dict(), default=str), "pmpm_version": __version__,
+                 "variant": self.scene.variant, "title": self.scene.title,
+                 "history_columns": list(HISTORY_COLUMNS)}
+        return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
+                          tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
+                          energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
+                          append=self.restarted_from is not None, truncate_after=self.restarted_from)
+
+    def _restore(self, path):
+        from .io import read_checkpoint
+        s = self.solver
+        fields, attrs = read_checkpoint(_checkpoint_base(path), self.comm)
+        cols = np.floor((fields["x"][:, s.axis] - s.grid.origin[s.axis]) * s.grid.inv_h).astype(np.int64)
+        from decomposition import alltoallv_fields
+        s.particles.fields = alltoallv_fields(self.comm, fields, s.decomp.owner_of_columns(cols))
+        s.t, s.step_count, s.dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
+        s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
+        s.removed = int(attrs.get("removed", 0))
+        self.restarted_from = s.t
+        logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
+
+    def checkpoint(self, snap=None):
+        """Write the current (or a snapshot's) state as the newest checkpoint."""
+        if not self.write:
+            return
+        from .io import write_checkpoint
+        s = self.solver
+        snap = snap or _Snapshot(s)
+        work = self.comm.allreduce(snap.external_work)
+        write_checkpoint(_checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
+                         {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": work,
+                          "removed": s.removed, "n_total": s.n_total})
+
+    # -- recording --------------------------------------------------------------------------
+    def record_history(self):
+        e = self.solver.energies()
+        self.history_t.append(self.solver.t)
+        self.history_rows.append(self.tracker.sample())
+        self.energy_rows.append([self.solver.t] + [e[k] for k in ENERGY_COLUMNS[1:]])
+        if self.initial_energy is None:
+            self.initial_energy = e["total"]
+        return e
+
+    def flush_history(self):
+        if not self.output or not self.history_t:
+            return
+        rows = np.array(self.history_rows)  # (S, tracks, cols)
+        self.output.write_history(np.array(self.history_t),
+                                  {name: rows[:, k, :] for k, name in enumerate(self.tracker.names)})
+        for row in self.energy_rows:
+            self.output.write_energies(dict(zip(ENERGY_COLUMNS, row)))
+        self.history_t, self.history_rows, self.energy_rows = [], [], []
+
+    def write_frame(self):
+        if self.output:
+            p = self.solver.particles
+            self.output.write_frame(self.solver.t, self.solver.step_count,
+                                    {f: p[f] for f in self._frame_fields()})
+            self.flush_history()
+
+    # -- the loop ---------------------------------------------------------------------------
+    def _log_start(self):
+        s = self.solver
+        cfg = self.scene.solver
+        logger.info("pmpm %s: %s%s", __version__, self.scene.title,
+                    f" [{self.scene.variant}]" if self.scene.variant else "")
+        logger.info("  %d particles on %d rank(s), grid %d x %d cells of %g, slabs along %s",
+                    s.n_total, s.decomp.size, *s.grid.cells, s.grid.h, "xy"[s.axis])
+        logger.info("  %s B-splines, %s, PIC blend %g, CFL %g, dt %.3g s, end %g s",
+                    cfg.shape_function, cfg.scheme.upper(), cfg.pic_blend, cfg.cfl, s.dt, cfg.end_time)
+        for m in s.materials:
+            logger.info("  material %s", m.describe())
+        for line in self.effects():
+            logger.info("  effect on: %s", line)
+        if cfg.time_step is not None and cfg.time_step > s.critical_dt():
+            logger.warning("time_step %.3g s is above the stable limit %.3g s (CFL = 1): expect divergence",
+                           cfg.time_step, s.critical_dt())
+
+    def effects(self):
+        """The optional physics this scene switches on (nothing else is compiled in)."""
+        s = self.solver
+        out = self.solver.loads.describe()
+        out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
+        if self.scene.solver.large_rotations:
+            out.append("large rotations (Jaumann stress rate)")
+        return out
+
+    def execute(self):
+        """Step to the end time; returns a summary dict. Raises on failure after saving."""
+        s, cfg, out = self.solver, self.scene.solver, self.scene.output
+        self._log_start()
+        end = cfg.end_time
+        eps = 1e-12 * end
+        next_history = s.t
+        next_frame = s.t if self.restarted_from is None else s.t + out.interval
+        next_ckpt = s.t + out.checkpoint_interval if out.checkpoint_interval else np.inf
+        snap = _Snapshot(s)
+        wall0 = time.perf_counter()
+        last_progress = wall0
+        t_start = s.t
+        while True:
+            if s.t >= next_history - eps:
+                self.record_history()
+                next_history += out.history_interval
+            if s.t >= next_frame - eps or s.t >= end - eps:
+                self.write_frame()
+                next_frame += out.interval
+            if s.t >= end - eps or (cfg.max_steps and s.step_count >= cfg.max_steps):
+                break
+            if s.t >= next_ckpt - eps:
+                self.checkpoint()
+                next_ckpt += out.checkpoint_interval
+            if s.step_count % self.snapshot_every == 0:
+                snap = _Snapshot(s)
+            try:
+                s.step()
+            except (UnstableRunError, ParticleExitError) as exc:
+                self.fail(exc, snap)
+                raise
+            now = time.perf_counter()
+            if out.progress_interval and now - last_progress >= out.progress_interval:
+                last_progress = now
+                self.progress(now - wall0, t_start)
+        self.flush_history()
+        wall = time.perf_counter() - wall0
+        self.progress(wall, t_start)
+        if out.checkpoint_interval:
+            self.checkpoint()
+        self.close()
+        summary = {"steps": s.step_count, "time": s.t, "wall": wall, "particles": s.n_total,
+                   "removed": s.removed, "output": self.path if self.write else None}
+        if s.removed:
+            logger.warning("%d particle(s) left the grid and were removed", s.removed)
+        return summary
+
+    def progress(self, wall, t_start):
+        s = self.solver
+        if self.rank != 0:
+            return
+        end = self.scene.solver.end_time
+        frac = (s.t - t_start) / max(end - t_start, 1e-300)
+        left = wall * (1 - frac) / frac if frac > 0 else float("nan")
+        logger.info("t = %.5g s (%5.1f%%)  step %d  dt %.3g s  wall %.1f s  left ~%.0f s",
+                    s.t, 100 * s.t / end, s.step_count, s.dt, wall, left)
+
+    def fail(self, exc, snap):
+        """Every rank arrives here together (the trouble flags are allreduced each step)."""
+        logger.error("run stopped: %s", exc)
+        try:
+            self.flush_history()
+            self.checkpoint(snap)
+            logger.error("last good state (t = %.6g s, step %d) saved to %s", snap.t, snap.step,
+                         _checkpoint_base(self.path) + ".ckpt*.h5" if self.write else "(no output)")
+        finally:
+            self.close()
+
+    def close(self):
+        if self.output is not None:
+            self.output.close()
+            self.output = None
+            if self.rank == 0:
+                from .io import write_xdmf
+                write_xdmf(self.path)
+
+
+def _checkpoint_base(path):
+    return path[:-3] if path.endswith(".h5") else path
