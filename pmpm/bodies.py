@@ -52,7 +52,7 @@ def _inside_polygon(pts, verts):
     return inside
 
 
-def _i_section(geo, grid, ppc):
+def _i_section(geo, grid, ppc, key):
     """Points of a member strip along start -> end, and their out-of-plane thickness."""
     start, end = np.asarray(geo["start"]), np.asarray(geo["end"])
     length = float(np.linalg.norm(end - start))
@@ -74,8 +74,17 @@ def _i_section(geo, grid, ppc):
     w_web, w_fl = in_web * tw, flange * bf
     M = np.array([[np.sum(w_web), np.sum(w_fl)],
                   [np.sum(w_web * eta ** 2), np.sum(w_fl * eta ** 2)]]) * area / length
-    a, b = np.linalg.solve(M, [A, I])
+    try:
+        a, b = np.linalg.solve(M, [A, I])
+    except np.linalg.LinAlgError:
+        a = b = math.nan
     thickness = a * w_web + b * w_fl
+    # too few point rows across the depth: M is singular, or matching I needs negative thickness
+    if not (np.all(np.isfinite(thickness)) and np.all(thickness > 0)
+            and np.allclose(M @ [a, b], [A, I], rtol=1e-6, atol=0)):
+        raise ConfigError(f"{key}.depth", f"{len(np.unique(eta))} particle row(s) across the depth cannot "
+                                          f"match area {A:g} and inertia {I:g} with positive thicknesses "
+                                          f"(refine the grid or raise particles_per_cell)")
     direction = (end - start) / length
     normal = np.array([-direction[1], direction[0]])
     pts = start + local[:, :1] * direction + local[:, 1:] * normal
@@ -84,13 +93,22 @@ def _i_section(geo, grid, ppc):
 
 def _mesh(geo, scene_dir, thickness):
     """Points per element of a mesh file read with meshio (triangles and quads)."""
+    import contextlib
+    import io
     import os
     import meshio
     path = geo["file"] if os.path.isabs(geo["file"]) else os.path.join(scene_dir, geo["file"])
+    said = io.StringIO()  # meshio prints reader errors and calls sys.exit(1) on unreadable files
     try:
-        mesh = meshio.read(path)
-    except Exception as exc:  # meshio raises many types; all mean "cannot use this file"
-        raise ConfigError(path, f"cannot read mesh ({type(exc).__name__}: {exc})") from None
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            mesh = meshio.read(path)
+    except (Exception, SystemExit) as exc:  # meshio raises many types; all mean "cannot use this file"
+        lines = [ln.strip() for ln in said.getvalue().splitlines() if ln.strip()]
+        detail = (lines[-1].removeprefix("Error: ") if isinstance(exc, SystemExit) and lines
+                  else f"{type(exc).__name__}: {exc}")
+        raise ConfigError(path, f"cannot read mesh ({' '.join(detail.split())})") from None
+    if said.getvalue().strip():
+        logger.warning("meshio on %s: %s", path, " ".join(said.getvalue().split()))
     pts = mesh.points[:, :2] * geo["scale"] + np.asarray(geo["offset"])
     n = geo["particles_per_element"]
     out, vols = [], []
@@ -126,8 +144,14 @@ def _mesh(geo, scene_dir, thickness):
     return np.concatenate(out), np.concatenate(vols)
 
 
-def body_points(body, grid, scene_dir):
-    """Positions (N, 2) and volumes (N,) of a body's material points."""
+def _exact_share(area, n):
+    """Equal volumes that add up to the shape's exact area (a lattice clipped by a curved or
+    slanted edge covers a slightly different area; mass and energy should not inherit that)."""
+    return np.full(n, area / max(n, 1))
+
+
+def body_points(body, grid, scene_dir, key="body"):
+    """Positions (N, 2) and volumes (N,) of a body's material points (``key`` names it in errors)."""
     geo, ppc, t = body.geometry, body.particles_per_cell, body.thickness
     if body.shape == "rectangle":
         pts, area = _lattice(geo["lower"], geo["upper"], grid.h / ppc)
@@ -136,14 +160,16 @@ def body_points(body, grid, scene_dir):
         c, r = np.asarray(geo["center"]), geo["radius"]
         pts, area = _grid_lattice(grid, c - r, c + r, ppc)
         pts = pts[np.sum((pts - c) ** 2, axis=1) < r * r]
-        return pts, np.full(len(pts), area * t)
+        return pts, _exact_share(math.pi * r * r, len(pts)) * t
     if body.shape == "polygon":
         verts = np.asarray(geo["vertices"])
         pts, area = _grid_lattice(grid, verts.min(axis=0), verts.max(axis=0), ppc)
         pts = pts[_inside_polygon(pts, verts)]
-        return pts, np.full(len(pts), area * t)
+        x, y = verts[:, 0], verts[:, 1]
+        shoelace = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+        return pts, _exact_share(shoelace, len(pts)) * t
     if body.shape == "i_section":
-        pts, area, thickness = _i_section(geo, grid, ppc)
+        pts, area, thickness = _i_section(geo, grid, ppc, key)
         return pts, area * thickness
     return _mesh(geo, scene_dir, t)
 
@@ -167,7 +193,7 @@ def _initial_velocity(body, pts, key):
 def generate_body(k, body, grid, density, scene_dir):
     """Material points of body ``k``: dict with x, v, vol, m (all ranks build the same set)."""
     key = f"bodies[{k}]"
-    pts, vol = body_points(body, grid, scene_dir)
+    pts, vol = body_points(body, grid, scene_dir, key)
     if len(pts) == 0:
         raise ConfigError(key, "holds no particle (smaller than the particle spacing?)")
     outside = ~grid.inside(pts)

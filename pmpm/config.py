@@ -7,6 +7,7 @@ the grid when the particles are generated (``pmpm.bodies``).
 """
 import dataclasses
 import logging
+import math
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -147,6 +148,10 @@ def _grid(t):
     return g
 
 
+def _finite(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def _velocity(t, name):
     value = t.raw(name, [0.0, 0.0])
     if (not isinstance(value, list) or len(value) != 2
@@ -164,7 +169,7 @@ def _geometry(t, shape):
     elif shape == "polygon":
         verts = t.raw("vertices")
         if (not isinstance(verts, list) or len(verts) < 3
-                or not all(isinstance(v, list) and len(v) == 2 for v in verts)):
+                or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) for c in v) for v in verts)):
             raise ConfigError(t.path("vertices"), "must be a list of at least 3 [x, y] points")
         geo = {"vertices": tuple(tuple(float(c) for c in v) for v in verts)}
     elif shape == "circle":
@@ -255,7 +260,7 @@ def _solver(t):
     return s
 
 
-def _output(t, stem, end_time):
+def _output(t, stem, end_time, state_fields=()):
     t = t or Table({}, "output")
     tracks = []
     for k, tr in enumerate(t.tables("track")):
@@ -267,6 +272,10 @@ def _output(t, stem, end_time):
     fields = t.raw("fields", ["x", "v", "stress", "strain"])
     if not isinstance(fields, list) or not all(isinstance(f, str) for f in fields):
         raise ConfigError("output.fields", "must be a list of field names")
+    known = ("id",) + PARTICLE_FIELDS + tuple(sorted(set(state_fields) - set(PARTICLE_FIELDS)))
+    for f in fields:
+        if f not in known:
+            raise ConfigError("output.fields", f"no particle field {f!r} in this scene (one of: {', '.join(known)})")
     deformed = t.table("deformed_plot", None)
     deformed_plot = None
     if deformed is not None:
@@ -304,13 +313,13 @@ def _materials(root, formulation):
     t = root.table("materials")
     if not t.data:
         raise ConfigError("materials", "empty: define at least one [materials.<label>] table")
-    resolved = {}
+    resolved, state_fields = {}, set()
     for label in t.data:
         table = t.table(label)
         material = make_material(table.data, table.key, formulation)  # validates
-        del material
+        state_fields.update(material.state_fields)
         resolved[label] = dict(table.data)
-    return resolved
+    return resolved, state_fields
 
 
 def parse_scene(data, path="<scene>"):
@@ -321,7 +330,7 @@ def parse_scene(data, path="<scene>"):
     thickness = root.number("thickness", 1.0, low=0, low_open=True)
     ppc = root.integer("particles_per_cell", 2, low=1, high=8)
     grid = _grid(root.table("grid"))
-    materials = _materials(root, formulation)
+    materials, state_fields = _materials(root, formulation)
     solver = _solver(root.table("solver"))
     stem = os.path.splitext(os.path.basename(path))[0]
     variants = root.raw("variants", {})
@@ -331,7 +340,7 @@ def parse_scene(data, path="<scene>"):
                   formulation=formulation, thickness=thickness, grid=grid, materials=materials,
                   bodies=_bodies(root, materials, ppc, thickness), boundaries=_boundaries(root),
                   loads=_loads(root), solver=solver,
-                  output=_output(root.table("output", None), stem, solver.end_time),
+                  output=_output(root.table("output", None), stem, solver.end_time, state_fields),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
     root.finish()
     return scene
@@ -341,7 +350,7 @@ def apply_overrides(data, overrides, where):
     """Copy of TOML ``data`` with dotted-key ``overrides`` (``"materials.steel.type" = ...``)."""
     import copy
     data = copy.deepcopy(data)
-    for dotted, value in overrides.items():
+    for dotted, value in _flatten(overrides):
         node = data
         parts = dotted.split(".")
         for part in parts[:-1]:
@@ -350,12 +359,24 @@ def apply_overrides(data, overrides, where):
                     node = node[int(part)]
                 except (ValueError, IndexError):
                     raise ConfigError(f"{where}.{dotted}", f"no list entry {part!r}") from None
-            else:
+            elif isinstance(node, dict):
                 node = node.setdefault(part, {})
-        if isinstance(node, list):
+            else:
+                raise ConfigError(f"{where}.{dotted}", f"{part!r} is inside a value that is not a table")
+        if not isinstance(node, dict):
             raise ConfigError(f"{where}.{dotted}", "cannot override a whole list entry")
         node[parts[-1]] = value
     return data
+
+
+def _flatten(overrides, prefix=""):
+    """(dotted key, value) pairs: a bare dotted key (``solver.cfl = 0.3``) reaches TOML as nested
+    tables and must override that one key, not replace the whole ``[solver]`` table."""
+    for key, value in overrides.items():
+        if isinstance(value, dict) and value:
+            yield from _flatten(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
 
 
 def read_toml(path):

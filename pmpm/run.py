@@ -20,7 +20,7 @@ from .tracking import HISTORY_COLUMNS, Tracker
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
 
-ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "external_work", "total")
+ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "internal_work", "external_work", "total")
 
 
 def output_path(scene):
@@ -36,6 +36,7 @@ class _Snapshot:
         self.fields = {k: a.copy() for k, a in solver.particles.fields.items()}
         self.t, self.step, self.dt = solver.t, solver.step_count, solver.dt
         self.external_work = solver.external_work
+        self.internal_work = solver.internal_work
 
 
 class Run:
@@ -95,6 +96,7 @@ class Run:
         s.particles.fields = alltoallv_fields(self.comm, fields, s.decomp.owner_of_columns(cols))
         s.t, s.step_count, s.dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
         s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
+        s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
@@ -106,9 +108,10 @@ class Run:
         from .io import write_checkpoint
         s = self.solver
         snap = snap or _Snapshot(s)
-        work = self.comm.allreduce(snap.external_work)
+        ext, internal = self.comm.allreduce(np.array([snap.external_work, snap.internal_work]))
         write_checkpoint(_checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
-                         {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": work,
+                         {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
+                          "internal_work": float(internal),
                           "removed": s.removed, "n_total": s.n_total})
 
     # -- recording --------------------------------------------------------------------------

@@ -70,6 +70,7 @@ class Solver:
         self.t = 0.0
         self.step_count = 0
         self.external_work = 0.0   # this rank's share; summed when reported
+        self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
         self.removed = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
@@ -169,6 +170,9 @@ class Solver:
         p = self.particles
         if self._dw is not None:
             K.jaumann_rotate(p["stress"], self._dw)
+        # internal work by the trapezoid rule, half before and half after the update; it closes
+        # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
+        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         several = len(self.materials) > 1
         for k, material in enumerate(self.materials):
             state = {name: p[name] for name in material.state_fields}
@@ -176,6 +180,7 @@ class Solver:
                 for name in material.tensor_state_fields:
                     K.jaumann_rotate(p[name], self._dw)
             material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
+        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
 
     # -- after the phases ---------------------------------------------------------------------
     def _check_and_next_dt(self):
@@ -263,7 +268,10 @@ class Solver:
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self):
-        """Global kinetic, elastic strain, plastic work and external work (J)."""
+        """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
+        work, internal work (integrated stress power: strain + dissipation, exact for any
+        material), external work, and ``total`` = kinetic + internal work, which equals the
+        external work plus the initial kinetic energy when the run conserves energy."""
         p = self.particles
         v = p["v"]
         kinetic = 0.5 * float(np.sum(p["m"] * np.sum(v * v, axis=1)))
@@ -272,6 +280,7 @@ class Solver:
             sel = p["mat"] == k
             strain += float(np.sum(p["vol"][sel] * material.elastic_energy_density(p["stress"][sel])))
         plastic = float(np.sum(p["vol"] * p["plastic_work"])) if "plastic_work" in p else 0.0
-        ke, se, pw, we = self.decomp.allreduce_sum(np.array([kinetic, strain, plastic, self.external_work]))
-        return {"kinetic": ke, "strain": se, "plastic_work": pw, "external_work": we,
-                "total": ke + se + pw}
+        ke, se, pw, wi, we = self.decomp.allreduce_sum(
+            np.array([kinetic, strain, plastic, self.internal_work, self.external_work]))
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
+                "external_work": we, "total": ke + wi}

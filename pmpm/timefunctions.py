@@ -22,7 +22,8 @@ def parse_time_function(t):
     elif kind == "table":
         times, values = t.raw("t"), t.raw("value")
         ok = (isinstance(times, list) and isinstance(values, list) and len(times) == len(values) >= 2
-              and all(isinstance(v, (int, float)) for v in times + values))
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                      for v in times + values))
         if not ok:
             raise ConfigError(t.path("t"), "t and value must be lists of numbers of equal length (>= 2)")
         if any(b <= a for a, b in zip(times, times[1:])):

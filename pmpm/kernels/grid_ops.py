@@ -40,3 +40,13 @@ def momentum_to_velocity(G, src, dst, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, 
                     G[i, j, dst + d] = bc_vel[i, j, d]
                 else:
                     G[i, j, dst + d] = G[i, j, src + d] / mi
+
+
+@nb.njit(cache=True)
+def stress_power(stress, de, vol):
+    """sum_p V_p sigma_p : de_p, the internal work of one half of a trapezoid step (called with
+    the stress before and after the update, each weighted 1/2 by the caller)."""
+    w = 0.0
+    for p in range(stress.shape[0]):
+        w += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
+    return w

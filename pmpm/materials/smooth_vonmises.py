@@ -70,18 +70,56 @@ __all__ = ["SmoothVonMises", "smooth_rate"]
 
 # Phi below this fraction of sigma_y has no usable flow direction; H1 = (1e-12)^N is zero anyway.
 _PHI_FLOOR = 1e-12
+# integer smoothness up to this value uses repeated squaring (a few multiplies) instead of pow
+_MAX_INT_POWER = 1024
 
 
 @nb.njit(cache=True, inline="always")
-def smooth_rate(plane_strain, E, nu, sy, N, c,
+def _ipow(x, k):
+    """x**k for an integer k >= 0 by repeated squaring."""
+    out = 1.0
+    while k:
+        if k & 1:
+            out *= x
+        x *= x
+        k >>= 1
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _h1(phi2, phi, isy, N, kint):
+    """H1 = (Phi / sigma_y)^N; ``kint`` > 0 selects an exact integer power (N = kint)."""
+    if kint > 0:
+        if kint % 2 == 0:
+            return _ipow(phi2 * isy * isy, kint // 2)
+        return _ipow(phi * isy, kint)
+    return (phi2 * isy * isy) ** (0.5 * N)
+
+
+@nb.njit(cache=True, inline="always")
+def _load(plane_strain, tx, ty, txy, tz, dexx, deyy, dgxy):
+    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain)."""
+    if plane_strain:
+        mean = (tx + ty + tz) / 3.0
+        return (tx - mean) * dexx + (ty - mean) * deyy + txy * dgxy
+    return tx * dexx + ty * deyy + txy * dgxy
+
+
+@nb.njit(cache=True, inline="always")
+def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, c, dse,
                 sxx, syy, sxy, szz, bxx, byy, bxy, bzz, dexx, deyy, dgxy):
     """Increments of stress, back stress and plastic strain for one strain increment.
 
     Parameters
     ----------
     plane_strain : bool
-    E, nu, sy, N, c : float
-        Young's modulus, Poisson ratio, yield stress, smoothness, Ziegler modulus alpha E/(1-alpha).
+    cps, nu, mu, isy, N, c : float
+        E / (1 - nu^2), Poisson ratio, shear modulus, 1 / sigma_y, smoothness,
+        Ziegler modulus alpha E / (1 - alpha).
+    kint : int
+        N as an integer when it is one (faster exact power), else 0.
+    dse : tuple of 4 float
+        The elastic stress increment D d_eps (the same for both stages, so computed once).
     sxx, syy, sxy, szz, bxx, byy, bxy, bzz : float
         Stress and back stress where the rate is evaluated.
     dexx, deyy, dgxy : float
@@ -93,7 +131,7 @@ def smooth_rate(plane_strain, E, nu, sy, N, c,
         (dsxx, dsyy, dsxy, dszz, dbxx, dbyy, dbxy, dbzz, dpxx, dpyy, dpxy, dlambda);
         the plastic zz strain is -(dpxx + dpyy).
     """
-    ds = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
+    ds = dse
     tx = sxx - bxx
     ty = syy - byy
     txy = sxy - bxy
@@ -107,57 +145,54 @@ def smooth_rate(plane_strain, E, nu, sy, N, c,
     else:
         phi2 = tx * tx - tx * ty + ty * ty + 3.0 * txy * txy
     load = tx * dexx + ty * deyy + txy * dgxy  # s . d_eps (dev(s) in plane strain); d_eps_zz = 0
-    floor = _PHI_FLOOR * sy
-    if load < 0.0 or phi2 <= floor * floor:
+    if load < 0.0 or phi2 * isy * isy <= _PHI_FLOOR * _PHI_FLOOR:
         return (ds[0], ds[1], ds[2], ds[3], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     h2 = 1.0 if load > 0.0 else 0.5
     phi = math.sqrt(phi2)
-    h1 = (phi2 / (sy * sy)) ** (0.5 * N)  # one pow, no extra sqrt
-    inv = 1.0 / phi
+    h1 = _h1(phi2, phi, isy, N, kint)
+    # Work with m = Phi n (no 1/Phi needed): with n = m / Phi,
+    #   d_lambda n = beta m,  beta = H1 H2 (D m . d_eps) / (m . D m + c Phi^3 / sigma_y),
+    # which is the design's d_lambda = H1 H2 (n.D d_eps)/(n.D n + n.G) with n.G = c Phi/sigma_y
+    # (G = c s/sigma_y and n.s = Phi), multiplied through by Phi^2. One division per stage.
     if plane_strain:
-        nxx = 1.5 * tx * inv
-        nyy = 1.5 * ty * inv
-        nzz = 1.5 * tz * inv
-        nxy = 3.0 * txy * inv
-        mu = E / (2.0 * (1.0 + nu))
-        dnxx = 2.0 * mu * nxx
-        dnyy = 2.0 * mu * nyy
-        dnxy = mu * nxy
-        dnzz = 2.0 * mu * nzz
-        ndn = 3.0 * mu  # n is deviatoric with sqrt(2/3 n:n) = 1
+        mxx = 1.5 * tx  # tx..tz hold dev(s) here, so G and eta stay deviatoric
+        myy = 1.5 * ty
+        mzz = 1.5 * tz
+        mxy = 3.0 * txy
+        dmxx = 2.0 * mu * mxx
+        dmyy = 2.0 * mu * myy
+        dmxy = mu * mxy
+        dmzz = 2.0 * mu * mzz
+        mdm = 3.0 * mu * phi2  # m deviatoric with sqrt(2/3 m:m) = Phi
     else:
-        nxx = (tx - 0.5 * ty) * inv
-        nyy = (ty - 0.5 * tx) * inv
-        nxy = 3.0 * txy * inv
-        cps = E / (1.0 - nu * nu)
-        dnxx = cps * (nxx + nu * nyy)
-        dnyy = cps * (nyy + nu * nxx)
-        dnxy = cps * 0.5 * (1.0 - nu) * nxy
-        dnzz = 0.0
-        ndn = nxx * dnxx + nyy * dnyy + nxy * dnxy
-    ndg = c * phi / sy  # n . G = c (n . s) / Phi0 and n . s = Phi (Phi is 1-homogeneous)
-    # tx..tz hold dev(s) in plane strain, so G (and eta) stay deviatoric there
-    dl = h1 * h2 * (dnxx * dexx + dnyy * deyy + dnxy * dgxy) / (ndn + ndg)
-    g = dl * c / sy
-    return (ds[0] - dl * dnxx, ds[1] - dl * dnyy, ds[2] - dl * dnxy, ds[3] - dl * dnzz,
+        mxx = tx - 0.5 * ty
+        myy = ty - 0.5 * tx
+        mxy = 3.0 * txy
+        mzz = 0.0
+        dmxx = cps * (mxx + nu * myy)
+        dmyy = cps * (myy + nu * mxx)
+        dmxy = cps * 0.5 * (1.0 - nu) * mxy
+        dmzz = 0.0
+        mdm = mxx * dmxx + myy * dmyy + mxy * dmxy
+    beta = h1 * h2 * (dmxx * dexx + dmyy * deyy + dmxy * dgxy) / (mdm + c * phi2 * phi * isy)
+    dl = beta * phi
+    g = dl * c * isy
+    return (ds[0] - beta * dmxx, ds[1] - beta * dmyy, ds[2] - beta * dmxy, ds[3] - beta * dmzz,
             g * tx, g * ty, g * txy, g * tz,
-            dl * nxx, dl * nyy, dl * nxy, dl)
-
-
-@nb.njit(cache=True, inline="always")
-def _load(plane_strain, tx, ty, txy, tz, dexx, deyy, dgxy):
-    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain)."""
-    if plane_strain:
-        mean = (tx + ty + tz) / 3.0
-        return (tx - mean) * dexx + (ty - mean) * deyy + txy * dgxy
-    return tx * dexx + ty * deyy + txy * dgxy
+            beta * mxx, beta * myy, beta * mxy, dl)
 
 
 @nb.njit(cache=True)
 def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which):
     E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
+    kint = 0
+    if N == math.floor(N) and N <= _MAX_INT_POWER:
+        kint = int(N)
     c = alpha * E / (1.0 - alpha)
     h = sy / E * min(0.1, 1.0 / N)
+    cps = E / (1.0 - nu * nu)
+    mu = E / (2.0 * (1.0 + nu))
+    isy = 1.0 / sy
     for p in range(stress.shape[0]):
         if which >= 0 and mat_ids[p] != which:
             continue
@@ -170,9 +205,8 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
         dgxy = de[p, 2] / nsub
         sxx, syy, sxy, szz = stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3]
         bxx, byy, bxy, bzz = back[p, 0], back[p, 1], back[p, 2], back[p, 3]
-        pxx, pyy, pxy = eps_p[p, 0], eps_p[p, 1], eps_p[p, 2]
-        eq = eps_eq[p]
-        w = work[p]
+        pxx = pyy = pxy = eq = w = 0.0  # this increment's plastic changes
+        plastic = False
         dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
         # growth of the loading indicator over an elastic half step: d_eps . D d_eps >= 0
         # (its deviatoric part 2 mu dev(d_eps) . d_eps >= 0 in plane strain)
@@ -188,12 +222,13 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
                 sxy += dse[2]
                 szz += dse[3]
                 continue
-            k = smooth_rate(plane_strain, E, nu, sy, N, c, sxx, syy, sxy, szz,
+            k = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, c, dse, sxx, syy, sxy, szz,
                             bxx, byy, bxy, bzz, dexx, deyy, dgxy)
-            m = smooth_rate(plane_strain, E, nu, sy, N, c,
+            m = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, c, dse,
                             sxx + 0.5 * k[0], syy + 0.5 * k[1], sxy + 0.5 * k[2], szz + 0.5 * k[3],
                             bxx + 0.5 * k[4], byy + 0.5 * k[5], bxy + 0.5 * k[6], bzz + 0.5 * k[7],
                             dexx, deyy, dgxy)
+            plastic = True
             # plastic work with the sub-step's mean stress closes the energy balance exactly
             w += ((sxx + 0.5 * m[0]) * m[8] + (syy + 0.5 * m[1]) * m[9] + (sxy + 0.5 * m[2]) * m[10]
                   - (szz + 0.5 * m[3]) * (m[8] + m[9]))
@@ -210,10 +245,13 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             pxy += m[10]
             eq += abs(m[11])
         stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = sxx, syy, sxy, szz
-        back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
-        eps_p[p, 0], eps_p[p, 1], eps_p[p, 2] = pxx, pyy, pxy
-        eps_eq[p] = eq
-        work[p] = w
+        if plastic:  # elastic points leave their state untouched (saves the stores)
+            back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
+            eps_p[p, 0] += pxx
+            eps_p[p, 1] += pyy
+            eps_p[p, 2] += pxy
+            eps_eq[p] += eq
+            work[p] += w
 
 
 class SmoothVonMises(Material):

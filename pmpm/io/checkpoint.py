@@ -1,0 +1,249 @@
+"""Restart checkpoints: the full particle state in id order, two files alternating.
+
+Files
+-----
+``<path_base>.ckpt0.h5`` and ``<path_base>.ckpt1.h5``.  Each write replaces the
+older (or an incomplete) one, so a crash while writing leaves the other intact.
+
+Layout of one checkpoint
+------------------------
+``/particles/<field>`` (n_total, \\*shape)
+    Every particle field handed to :func:`write_checkpoint`, row ``i`` = id ``i``;
+    ids that no longer exist hold NaN / -1 (``/particles/id`` is -1 there).
+Root attributes
+    ``time``, ``step``, ``n_total``, ``layout`` (``"pmpm-checkpoint-1"``), ``attrs``
+    (JSON of the caller's dict plus time, step and n_total) and ``complete``, set to
+    True last, after a flush, so a file without it was cut short.
+
+Rows are put into id order with the same one-Alltoallv redistribution as the results
+file, and each rank writes its id block; reading gives rank ``r`` the id block
+``block_range(n_total, size, r)``, so a run may restart on a different rank count.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+
+import h5py
+import numpy as np
+from mpi4py import MPI
+
+from decomposition.slab import block_range
+
+from ._parallel import (
+    check_all,
+    fill_value,
+    json_dumps,
+    mpio_available,
+    owner_bounds,
+    to_id_blocks,
+    validate_rows,
+    write_rows,
+)
+
+__all__ = ["write_checkpoint", "read_checkpoint", "checkpoint_paths", "latest_checkpoint"]
+
+logger = logging.getLogger(__name__)
+
+LAYOUT = "pmpm-checkpoint-1"
+
+
+def checkpoint_paths(path_base):
+    """Return the two alternating checkpoint file names of ``path_base``.
+
+    Parameters
+    ----------
+    path_base : str or os.PathLike
+        Common prefix, e.g. ``"out/portal"``.
+
+    Returns
+    -------
+    list of str
+        ``[<path_base>.ckpt0.h5, <path_base>.ckpt1.h5]``.
+    """
+    base = os.fspath(path_base)
+    return [f"{base}.ckpt{i}.h5" for i in (0, 1)]
+
+
+def _complete_step(path):
+    """Return the step of a complete checkpoint file, or None (missing, cut short, corrupt)."""
+    if not os.path.exists(path):
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            if bool(f.attrs.get("complete", False)) and "particles/id" in f:
+                return int(f.attrs["step"])
+    except (OSError, KeyError, ValueError) as exc:
+        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)
+    return None
+
+
+def latest_checkpoint(path_base):
+    """Return the newest complete checkpoint file (largest step), serially.
+
+    Parameters
+    ----------
+    path_base : str or os.PathLike
+        Common prefix of the checkpoint files.
+
+    Returns
+    -------
+    str or None
+        Path, or None when no complete checkpoint exists.
+    """
+    steps = [(s, p) for p in checkpoint_paths(path_base) if (s := _complete_step(p)) is not None]
+    return max(steps)[1] if steps else None
+
+
+def _next_slot(path_base):
+    """Return the file to overwrite: a missing or incomplete one, else the older one."""
+    paths = checkpoint_paths(path_base)
+    steps = [_complete_step(p) for p in paths]
+    for path, step in zip(paths, steps):
+        if step is None:
+            return path
+    return paths[int(np.argmin(steps))]
+
+
+def _agreed_specs(comm, fields):
+    """Return {name: (trailing, dtype)} agreed by all ranks (collective).
+
+    Ranks with rows decide the trailing shapes, since an empty rank may hand
+    ``(0,)`` for a ``(0, 2)`` field.
+    """
+    nrows = len(np.asarray(fields.get("id", ())).reshape(-1))
+    local = {k: (tuple(np.shape(v)[1:]), np.asarray(v).dtype.str) for k, v in fields.items()}
+    everyone = comm.allgather((nrows, local))
+    names = {frozenset(spec) for _, spec in everyone}
+    deciders = [spec for n, spec in everyone if n > 0] or [everyone[0][1]]
+    specs = deciders[0]
+    ok = len(names) == 1 and all(d == specs for d in deciders) and "id" in specs
+    if not ok:
+        raise ValueError("checkpoint fields differ between ranks (names, shapes or dtypes) "
+                         "or lack 'id'")
+    out = {k: (trailing, np.dtype(dt)) for k, (trailing, dt) in sorted(specs.items())}
+    out["id"] = ((), np.dtype(np.int64))
+    return out
+
+
+def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None, mode="mpio"):
+    """Write a checkpoint of every particle field (collective).
+
+    Parameters
+    ----------
+    path_base : str or os.PathLike
+        Common prefix; the file written is one of :func:`checkpoint_paths`.
+    comm : mpi4py.MPI.Comm
+        Communicator; every rank calls, also with zero particles.
+    time : float
+        Simulation time.
+    step : int
+        Step number; reading picks the complete checkpoint with the largest step.
+    fields : dict of str to numpy.ndarray
+        This rank's particles, ``"id"`` included, rows in any order.
+    attrs : dict
+        JSON-serialisable run state (dt, work of external forces, ...).
+    n_total : int, optional
+        Number of particle ids; default ``attrs["n_total"]`` or the largest id + 1.
+    mode : {"mpio", "gather"}, optional
+        Parallel HDF5 (default) or gather to rank 0 and write with plain h5py.
+
+    Returns
+    -------
+    str
+        The file written.
+
+    Raises
+    ------
+    ValueError
+        On every rank, if the fields differ between ranks or carry bad ids.
+    """
+    rank, size = comm.Get_rank(), comm.Get_size()
+    specs = _agreed_specs(comm, fields)
+    if n_total is None:
+        ids = np.asarray(fields["id"]).reshape(-1)
+        n_total = attrs.get("n_total") or comm.allreduce(int(ids.max()) + 1 if len(ids) else 0, op=MPI.MAX)
+    n_total = int(n_total)
+    message = validate_rows(fields, specs, n_total)
+    check_all(comm, message is None, message)
+    gather = mode == "gather" or (size > 1 and not mpio_available())
+    bounds = owner_bounds(n_total, size, gather=gather)
+    blocks, duplicates = to_id_blocks(comm, fields, specs, bounds)
+    check_all(comm, duplicates == 0, f"{duplicates} particle ids appear more than once")
+    path = comm.bcast(_next_slot(path_base) if rank == 0 else None)
+    state = {**attrs, "time": float(time), "step": int(step), "n_total": n_total}
+    if not gather or rank == 0:
+        _write_file(path, comm if not gather and size > 1 else None, state, specs, blocks,
+                    int(bounds[rank]))
+    # No rank returns before the file is complete (a caller may read it at once)
+    comm.Barrier()
+    logger.info("checkpoint step %d (t=%g) written to %s", step, time, path)
+    return path
+
+
+def _write_file(path, comm, state, specs, blocks, start):
+    """Create one checkpoint file; ``comm`` is given for the mpio driver, else None."""
+    kwargs = {"driver": "mpio", "comm": comm} if comm is not None else {}
+    with h5py.File(path, "w", **kwargs) as f:
+        f.attrs["complete"] = False
+        f.attrs["layout"] = LAYOUT
+        for key in ("time", "step", "n_total"):
+            f.attrs[key] = state[key]
+        f.attrs["attrs"] = json_dumps(state)
+        grp = f.create_group("particles")
+        for name, (trailing, dtype) in specs.items():
+            dset = grp.create_dataset(name, (state["n_total"],) + trailing, dtype,
+                                      fillvalue=fill_value(dtype))
+            write_rows(dset, (), start, blocks[name], comm is not None)
+        # Data reaches the disk before the flag that vouches for it
+        f.flush()
+        f.attrs["complete"] = True
+        f.flush()
+
+
+def read_checkpoint(path_base, comm):
+    """Read the newest complete checkpoint; rank ``r`` gets id block ``r`` (collective).
+
+    Parameters
+    ----------
+    path_base : str or os.PathLike
+        Common prefix of the checkpoint files.
+    comm : mpi4py.MPI.Comm
+        Communicator of the reading ranks (any size, not necessarily the writer's).
+
+    Returns
+    -------
+    fields : dict of str to numpy.ndarray
+        The existing particles of ids ``block_range(n_total, size, rank)`` (rows of
+        removed particles dropped), in id order.
+    attrs : dict
+        The dict given to :func:`write_checkpoint` plus ``time``, ``step`` and
+        ``n_total``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If neither checkpoint file exists.
+    ValueError
+        If the files exist but none is complete.
+    """
+    paths = checkpoint_paths(path_base)
+    path = comm.bcast(latest_checkpoint(path_base) if comm.Get_rank() == 0 else None)
+    if path is None:
+        existing = comm.bcast([p for p in paths if os.path.exists(p)] if comm.Get_rank() == 0 else None)
+        if not existing:
+            raise FileNotFoundError(f"no checkpoint found: neither {paths[0]} nor {paths[1]} exists")
+        raise ValueError(f"no complete checkpoint: {', '.join(existing)} cut short or unreadable")
+    # Reads are independent (each rank its own block): plain h5py is enough
+    with h5py.File(path, "r") as f:
+        attrs = json.loads(f.attrs["attrs"])
+        count, start = block_range(int(f.attrs["n_total"]), comm.Get_size(), comm.Get_rank())
+        grp = f["particles"]
+        fields = {name: grp[name][start:start + count] for name in grp}
+    keep = fields["id"] != -1
+    fields = {name: arr[keep] for name, arr in fields.items()}
+    logger.info("read checkpoint %s (step %s): %d particles on this rank", path,
+                attrs.get("step"), int(keep.sum()))
+    return fields, attrs

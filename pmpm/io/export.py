@@ -1,0 +1,110 @@
+"""Export a results file to other formats: VTU series (meshio) or the XDMF sidecar.
+
+``fmt="vtu"`` writes one ``<stem>_NNNNN.vtu`` per complete frame, each holding the
+particles that exist in that frame (finite position) as ``vertex`` cells with every
+frame field as point data (plus ``id``, the particle id, when it is not a frame
+field), and a ``<stem>.pvd`` collection that ParaView opens as a time series.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import xml.etree.ElementTree as ET
+
+import h5py
+import meshio
+import numpy as np
+
+from .xdmf import write_xdmf
+
+__all__ = ["export", "FORMATS"]
+
+logger = logging.getLogger(__name__)
+
+FORMATS = ("vtu", "xdmf")
+
+
+def _frame_mesh(frames, index):
+    """Return the meshio.Mesh of frame ``index`` (existing particles only)."""
+    x = frames["x"][index]
+    alive = np.flatnonzero(np.all(np.isfinite(x), axis=1))
+    # VTU points are 3-D; pad here rather than let meshio warn on every file
+    points = np.zeros((len(alive), 3))
+    points[:, :2] = x[alive]
+    data = {"id": alive.astype(np.int64)}
+    for name, dset in frames.items():
+        if name not in ("time", "step") and dset.ndim >= 2:
+            data[name] = dset[index][alive]
+    cells = [("vertex", np.arange(len(alive), dtype=np.int64)[:, None])]
+    return meshio.Mesh(points, cells, point_data=data)
+
+
+def _write_pvd(path, entries):
+    """Write a ParaView collection of ``(time, file name)`` entries."""
+    root = ET.Element("VTKFile", type="Collection", version="0.1")
+    coll = ET.SubElement(root, "Collection")
+    for time, name in entries:
+        ET.SubElement(coll, "DataSet", timestep=repr(float(time)), group="", part="0", file=name)
+    ET.indent(root)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+
+
+def _export_vtu(h5_path, outdir):
+    """Write one VTU per complete frame and the PVD series; return their paths."""
+    stem = os.path.splitext(os.path.basename(h5_path))[0]
+    os.makedirs(outdir, exist_ok=True)
+    paths, entries = [], []
+    with h5py.File(h5_path, "r") as f:
+        frames = f["frames"]
+        if "x" not in frames:
+            raise ValueError(f"{h5_path} has no /frames/x to use as particle positions")
+        for index, time in enumerate(frames["time"][()]):
+            if not np.isfinite(time):
+                continue  # cut short by a crash
+            name = f"{stem}_{index:05d}.vtu"
+            meshio.write(os.path.join(outdir, name), _frame_mesh(frames, index), file_format="vtu")
+            paths.append(os.path.join(outdir, name))
+            entries.append((time, name))
+    pvd = os.path.join(outdir, f"{stem}.pvd")
+    _write_pvd(pvd, entries)
+    return paths + [pvd]
+
+
+def export(h5_path, fmt="vtu", outdir=None):
+    """Export a results file (serial; call on one rank).
+
+    Parameters
+    ----------
+    h5_path : str or os.PathLike
+        Results file written by :class:`pmpm.io.OutputFile`.
+    fmt : {"vtu", "xdmf"}, optional
+        ``"vtu"``: one VTU per frame plus a PVD series (default); ``"xdmf"``: the
+        XDMF sidecar (:func:`pmpm.io.write_xdmf`).
+    outdir : str or os.PathLike, optional
+        Output folder; default ``<stem>_vtu`` beside the file for VTU, the file's
+        own folder for XDMF.
+
+    Returns
+    -------
+    list of str
+        Files written; for VTU the frames in order, then the ``.pvd``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown format.
+    """
+    h5_path = os.fspath(h5_path)
+    stem, folder = os.path.splitext(h5_path)[0], os.path.dirname(h5_path)
+    if fmt == "vtu":
+        paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
+    elif fmt == "xdmf":
+        target_dir = os.fspath(outdir) if outdir else folder
+        os.makedirs(target_dir or ".", exist_ok=True)
+        target = os.path.join(target_dir, os.path.basename(stem) + ".xdmf")
+        paths = [write_xdmf(h5_path, target)]
+    else:
+        raise ValueError(f"unknown export format {fmt!r}; valid formats: {', '.join(FORMATS)}")
+    logger.info("exported %s to %d %s files", h5_path, len(paths), fmt)
+    return paths

@@ -1,0 +1,585 @@
+"""The run's results file: one HDF5 file per run, written by every rank at once.
+
+Layout
+------
+Root attributes
+    ``scene`` (the resolved scene as a JSON string), ``pmpm_version``, ``n_total``,
+    ``io_mode``, ``layout`` (``"pmpm-results-1"``), ``restart_times`` (after
+    restarts) and every other attribute handed to :class:`OutputFile` (dicts and
+    lists of non-numbers as JSON strings).
+``/frames/time`` (F,) float64, ``/frames/step`` (F,) int64
+    Time and step of each frame.  A frame whose ``time`` is NaN was cut short by a
+    crash (its fields are undefined); reopening with ``append=True`` drops it.
+``/frames/<field>`` (F, n_total, \\*shape)
+    One dataset per frame field, chunked ``(1, rows, *shape)`` and resizable along F.
+    Row ``i`` is the particle with id ``i``; particles that no longer exist (removed
+    from the grid) read NaN (floats) or -1 (integers).  Fields with one trailing
+    axis carry a ``components`` attribute (e.g. ``sxx syy sxy szz`` for ``stress``).
+``/topology/vertices`` (n_total,) int64
+    ``0 .. n_total-1``: the explicit Polyvertex connectivity for the XDMF sidecar.
+``/history/time`` (S,), ``/history/<track>`` (S, ncols) float64
+    Time histories of tracked points; each track's ``columns`` attribute names
+    its columns (also stored on ``/history``).
+``/energies/<column>`` (E,) float64
+    Energy balance rows; ``time`` is always one of the columns.
+
+Parallel writing
+----------------
+``mode="mpio"`` opens the file with h5py's ``"mpio"`` driver on ``comm``.  A frame is
+written by first moving each particle row, with ONE
+:func:`decomposition.alltoallv_fields`, to the rank that owns its id block
+(``block_range(n_total, size, r)``), so each rank then writes one contiguous
+hyperslab per field in a collective write.  Every rank makes every collective call
+(resize, write, flush), including ranks that hold no rows: they select nothing and
+still write (h5py issue 965).  Histories and energies are identical on all ranks:
+every rank resizes (a collective metadata operation) and rank 0 writes the rows.
+``mode="gather"`` is the fallback behind the same interface: rows are gathered to
+rank 0, which alone opens the file with plain h5py.  With one rank, ``"mpio"`` uses
+the default driver (same layout, no MPI-IO).  The file is flushed after every write
+call, so a killed run leaves a readable file up to its last completed write.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import logging
+import os
+
+import h5py
+import numpy as np
+
+from ._parallel import (
+    check_all,
+    fill_value,
+    json_dumps,
+    mpio_available,
+    owner_bounds,
+    to_id_blocks,
+    validate_rows,
+    write_rows,
+)
+
+__all__ = [
+    "OutputFile",
+    "COMPONENT_NAMES",
+    "read_attrs",
+    "read_frame",
+    "read_history",
+    "read_energies",
+    "component_names",
+]
+
+logger = logging.getLogger(__name__)
+
+LAYOUT = "pmpm-results-1"
+MODES = ("mpio", "gather")
+
+# Names of the components of known fields, stored as the ``components`` attribute
+COMPONENT_NAMES = {
+    "x": ("x", "y"),
+    "x0": ("x", "y"),
+    "v": ("vx", "vy"),
+    "stress": ("sxx", "syy", "sxy", "szz"),
+    "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz"),
+    "strain": ("exx", "eyy", "gxy"),
+}
+
+_TARGET_CHUNK_BYTES = 1 << 20
+
+
+def component_names(name, trailing):
+    """Return names for the components of a field with one trailing axis.
+
+    Parameters
+    ----------
+    name : str
+        Field name.
+    trailing : tuple of int
+        Shape of one row.
+
+    Returns
+    -------
+    tuple of str
+        Known names from :data:`COMPONENT_NAMES` when their count matches, else
+        ``name_0, name_1, ...``; empty for scalars or higher-rank rows.
+    """
+    if len(trailing) != 1:
+        return ()
+    known = COMPONENT_NAMES.get(name, ())
+    if len(known) == trailing[0]:
+        return tuple(known)
+    return tuple(f"{name}_{i}" for i in range(trailing[0]))
+
+
+def _pmpm_version():
+    """Return the installed pmpm version, or ``"unknown"``."""
+    try:
+        return importlib.metadata.version("pmpm")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _attr_value(value):
+    """Turn ``value`` into something h5py stores as an attribute."""
+    if isinstance(value, (str, bytes, bool, int, float, np.generic)):
+        return value
+    if isinstance(value, (list, tuple, np.ndarray)):
+        arr = np.asarray(value)
+        if arr.dtype.kind in "biuf" and arr.size:
+            return arr
+    return json_dumps(value)
+
+
+def _leading_count(times, t):
+    """Return how many leading entries of ``times`` are finite and ``<= t``."""
+    ok = np.isfinite(times)
+    if t is not None:
+        ok &= times <= t
+    return len(ok) if ok.all() else int(np.argmin(ok))
+
+
+class OutputFile:
+    """The run's HDF5 results file (frames, histories, energies), written collectively.
+
+    Every method is collective over ``comm``: every rank calls it in the same order,
+    with its own particle rows (possibly none) and identical history and energy rows.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        File to create (or reopen with ``append=True``).
+    comm : mpi4py.MPI.Comm
+        Communicator of the ranks that write.
+    attrs : dict
+        Root attributes; ``"scene"`` (the resolved scene, a dict or a JSON string)
+        is stored as a JSON string; rank 0's values are used.
+    n_total : int
+        Number of particle ids (``0 .. n_total-1``), at least 1.
+    frame_fields : dict of str to (tuple, dtype)
+        Trailing shape and dtype of each field written in every frame, e.g.
+        ``{"x": ((2,), "f8"), "mat": ((), "i4")}``.
+    tracks : list of str
+        Names of the tracked points.
+    history_columns : list of str
+        Columns of one history row of a track.
+    energy_columns : list of str
+        Energy columns; must include ``"time"``.
+    mode : {"mpio", "gather"}, optional
+        Parallel HDF5 (default) or gather to rank 0.  ``"mpio"`` falls back to
+        ``"gather"`` with a warning when h5py lacks parallel HDF5.
+    append : bool, optional
+        Reopen an existing file (restart) instead of creating it.
+    truncate_after : float, optional
+        With ``append``, drop frame, history and energy rows with time greater than
+        this (rows cut short by a crash are always dropped).
+
+    Raises
+    ------
+    ValueError
+        On an unknown mode, bad names, or an existing file whose layout differs.
+    """
+
+    def __init__(self, path, comm, attrs, n_total, frame_fields, tracks,
+                 history_columns, energy_columns, mode="mpio", append=False,
+                 truncate_after=None):
+        self.path = os.fspath(path)
+        self.comm = comm
+        self.rank, self.size = comm.Get_rank(), comm.Get_size()
+        self.mode = self._resolve_mode(mode)
+        self.n_total = int(n_total)
+        self.frame_specs = {name: (tuple(shape), np.dtype(dtype))
+                            for name, (shape, dtype) in sorted(frame_fields.items())}
+        self.tracks = list(tracks)
+        self.history_columns = list(history_columns)
+        self.energy_columns = list(energy_columns)
+        self._check_names()
+        # In gather mode only rank 0 touches the file; in mpio mode every rank does
+        self._meta = self.mode == "mpio" or self.rank == 0
+        self._driver = "mpio" if self.mode == "mpio" and self.size > 1 else None
+        self._bounds = owner_bounds(self.n_total, self.size, gather=self.mode == "gather")
+        self.file = None
+        self.n_frames = self.n_history = self.n_energies = 0
+        attrs = comm.bcast(dict(attrs) if self.rank == 0 else None)
+        exists = comm.bcast(os.path.exists(self.path) if self.rank == 0 else None)
+        if append and not exists:
+            logger.warning("append=True but %s does not exist: creating it", self.path)
+        if append and exists:
+            self._guarded(lambda: self._reopen(attrs, truncate_after))
+        else:
+            self._guarded(lambda: self._create(attrs))
+        counts = (self.n_frames, self.n_history, self.n_energies)
+        self.n_frames, self.n_history, self.n_energies = comm.bcast(counts)
+
+    # ------------------------------------------------------------------ setup
+    def _resolve_mode(self, mode):
+        """Validate ``mode`` and fall back to gather without parallel h5py."""
+        if mode not in MODES:
+            raise ValueError(f"unknown output mode {mode!r}; valid modes: {', '.join(MODES)}")
+        if mode == "mpio" and self.size > 1 and not mpio_available():
+            logger.warning("h5py has no parallel HDF5: writing %s in 'gather' mode", "results")
+            return "gather"
+        return mode
+
+    def _check_names(self):
+        """Refuse names that would clash with the layout or HDF5 paths."""
+        if self.n_total < 1:
+            raise ValueError(f"n_total must be at least 1, got {self.n_total}")
+        # Names become HDF5 paths, and time/step are datasets of the same groups
+        bad = [n for n in [*self.frame_specs, *self.tracks, *self.energy_columns] if not n or "/" in n]
+        bad += [n for n in self.frame_specs if n in ("time", "step")]
+        bad += [n for n in self.tracks if n == "time"]
+        if bad:
+            raise ValueError(f"invalid field, track or column names: {bad}")
+        if "time" not in self.energy_columns:
+            raise ValueError(f"energy_columns must include 'time', got {self.energy_columns}")
+        if self.tracks and not self.history_columns:
+            raise ValueError("history_columns is empty but tracks were given")
+
+    def _guarded(self, fn):
+        """Run ``fn`` on the ranks that touch the file; raise everywhere if it fails."""
+        error = None
+        if self._meta:
+            try:
+                fn()
+            except Exception as exc:  # re-raised below, on every rank
+                error = exc
+        reasons = self.comm.allgather(None if error is None else (type(error), str(error)))
+        failed = [(r, e) for r, e in enumerate(reasons) if e is not None]
+        if not failed:
+            return
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+        if error is not None:
+            raise error
+        exc_type, text = failed[0][1]
+        raise exc_type(f"rank {failed[0][0]}: {text}")
+
+    def _open(self, h5mode):
+        """Open the file on the ranks that touch it."""
+        kwargs = {"driver": "mpio", "comm": self.comm} if self._driver == "mpio" else {}
+        self.file = h5py.File(self.path, h5mode, **kwargs)
+
+    def _create(self, attrs):
+        """Create the file with empty, resizable datasets (collective metadata)."""
+        self._open("w")
+        self._write_root_attrs(attrs)
+        f = self.file
+        frames = f.create_group("frames")
+        frames.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
+        frames.create_dataset("step", (0,), "i8", maxshape=(None,), chunks=(1024,), fillvalue=-1)
+        for name, (trailing, dtype) in self.frame_specs.items():
+            self._create_frame_dataset(frames, name, trailing, dtype)
+        self._write_vertices(f)
+        hist = f.create_group("history")
+        hist.attrs["columns"] = np.array(self.history_columns, dtype=h5py.string_dtype())
+        hist.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
+        ncols = len(self.history_columns)
+        for track in self.tracks:
+            dset = hist.create_dataset(track, (0, ncols), "f8", maxshape=(None, ncols),
+                                       chunks=(256, ncols), fillvalue=np.nan)
+            dset.attrs["columns"] = np.array(self.history_columns, dtype=h5py.string_dtype())
+        energies = f.create_group("energies")
+        for column in self.energy_columns:
+            energies.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
+        f.flush()
+        logger.info("created %s (%s mode, %d particles)", self.path, self.mode, self.n_total)
+
+    def _create_frame_dataset(self, frames, name, trailing, dtype):
+        """Create ``/frames/<name>`` of shape (0, n_total, *trailing)."""
+        row_bytes = int(np.prod(trailing, dtype=np.int64)) * dtype.itemsize
+        rows = max(1, min(self.n_total, _TARGET_CHUNK_BYTES // max(row_bytes, 1)))
+        # Every row of a frame is written, so writing fill values first is wasted IO
+        dset = frames.create_dataset(
+            name, (0, self.n_total) + trailing, dtype,
+            maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + trailing,
+            fillvalue=fill_value(dtype), fill_time="never")
+        comps = component_names(name, trailing)
+        if comps:
+            dset.attrs["components"] = np.array(comps, dtype=h5py.string_dtype())
+
+    def _write_vertices(self, f):
+        """Write ``/topology/vertices`` (0..n_total-1), each rank its own block."""
+        dset = f.create_dataset("topology/vertices", (self.n_total,), "i8")
+        start, stop = int(self._bounds[self.rank]), int(self._bounds[self.rank + 1])
+        write_rows(dset, (), start, np.arange(start, stop, dtype=np.int64), self._driver == "mpio")
+
+    def _write_root_attrs(self, attrs):
+        """Store the scene, the version and the caller's attributes on the root."""
+        merged = {"pmpm_version": _pmpm_version()}
+        merged.update(attrs)
+        merged.update(layout=LAYOUT, n_total=self.n_total, io_mode=self.mode)
+        if "scene" in merged and not isinstance(merged["scene"], str):
+            merged["scene"] = json_dumps(merged["scene"])
+        for key, value in merged.items():
+            self.file.attrs[key] = _attr_value(value)
+
+    def _reopen(self, attrs, truncate_after):
+        """Reopen for a restart: check the layout, drop rows after ``truncate_after``."""
+        self._open("r+")
+        self._check_layout()
+        f = self.file
+        self.n_frames = _leading_count(f["frames/time"][:], truncate_after)
+        self.n_history = _leading_count(f["history/time"][:], truncate_after)
+        self.n_energies = _leading_count(f["energies/time"][:], truncate_after)
+        for group, n in (("frames", self.n_frames), ("history", self.n_history),
+                         ("energies", self.n_energies)):
+            for dset in f[group].values():
+                if dset.shape[0] != n:
+                    dset.resize(n, axis=0)
+        self._write_root_attrs(attrs)
+        restarts = list(f.attrs.get("restart_times", []))
+        restarts.append(np.nan if truncate_after is None else float(truncate_after))
+        f.attrs["restart_times"] = np.array(restarts, dtype="f8")
+        f.flush()
+        logger.info("reopened %s after t=%s: %d frames, %d history rows, %d energy rows",
+                    self.path, truncate_after, self.n_frames, self.n_history, self.n_energies)
+
+    def _check_layout(self):
+        """Raise ValueError if the existing file does not match this writer's layout."""
+        f, problems = self.file, []
+        if int(f.attrs.get("n_total", -1)) != self.n_total:
+            problems.append(f"n_total {f.attrs.get('n_total')} != {self.n_total}")
+        for name, (trailing, dtype) in self.frame_specs.items():
+            dset = f.get(f"frames/{name}")
+            if dset is None or dset.shape[1:] != (self.n_total,) + trailing or dset.dtype != dtype:
+                problems.append(f"frame field {name!r} missing or of another shape/dtype")
+        for track in self.tracks:
+            dset = f.get(f"history/{track}")
+            if dset is None or dset.shape[1] != len(self.history_columns):
+                problems.append(f"history track {track!r} missing or of another width")
+        problems += [f"energy column {c!r} missing" for c in self.energy_columns
+                     if f"energies/{c}" not in f]
+        if problems:
+            raise ValueError(f"{self.path} does not match the run's output layout: " + "; ".join(problems))
+
+    # ------------------------------------------------------------------ writing
+    def write_frame(self, time, step, fields):
+        """Append one frame: every frame field of every particle, in id order.
+
+        Collective: every rank calls it with its own rows, also with none.
+
+        Parameters
+        ----------
+        time : float
+            Simulation time (rank 0's value is stored).
+        step : int
+            Step number (rank 0's value is stored).
+        fields : dict of str to numpy.ndarray
+            This rank's particles: ``"id"`` and every frame field, rows in any order;
+            extra keys are ignored.
+
+        Raises
+        ------
+        ValueError
+            On every rank, if any rank's fields are missing, misshapen, carry ids
+            outside ``[0, n_total)`` or repeat an id.
+        """
+        message = validate_rows(fields, self.frame_specs, self.n_total)
+        check_all(self.comm, message is None, message)
+        blocks, duplicates = to_id_blocks(self.comm, fields, self.frame_specs, self._bounds)
+        check_all(self.comm, duplicates == 0, f"{duplicates} particle ids appear more than once")
+        index, start = self.n_frames, int(self._bounds[self.rank])
+        if self._meta:
+            frames = self.file["frames"]
+            for name in ("time", "step", *self.frame_specs):
+                frames[name].resize(index + 1, axis=0)
+            for name in self.frame_specs:
+                write_rows(frames[name], (index,), start, blocks[name], self._driver == "mpio")
+            # time last: a frame with a NaN time was cut short (see the module docs)
+            if self.rank == 0:
+                frames["step"][index] = int(step)
+                frames["time"][index] = float(time)
+            self.file.flush()
+        self.n_frames = index + 1
+
+    def _append_rows(self, group, arrays):
+        """Grow every dataset of ``group`` by the rows in ``arrays``; rank 0 writes."""
+        k = len(next(iter(arrays.values())))
+        check_all(self.comm, self.comm.bcast(k) == k, f"{k} rows here, another count on rank 0")
+        if not self._meta:
+            return k
+        grp = self.file[group]
+        old = grp["time"].shape[0]
+        for name in arrays:
+            grp[name].resize(old + k, axis=0)
+        if self.rank == 0:
+            for name, values in arrays.items():
+                grp[name][old:old + k] = values
+        self.file.flush()
+        return k
+
+    def write_history(self, times, rows):
+        """Append history rows of the tracked points.
+
+        Collective; the data must be identical on all ranks.
+
+        Parameters
+        ----------
+        times : array_like, shape (k,)
+            Time of each row.
+        rows : dict of str to array_like, shape (k, len(history_columns))
+            Rows of each track; tracks left out get NaN rows.
+
+        Raises
+        ------
+        ValueError
+            For an unknown track or a row block of the wrong shape.
+        """
+        times = np.atleast_1d(np.asarray(times, dtype="f8"))
+        unknown = sorted(set(rows) - set(self.tracks))
+        if unknown:
+            raise ValueError(f"unknown history tracks {unknown}; known: {self.tracks}")
+        shape = (len(times), len(self.history_columns))
+        arrays = {"time": times}
+        for track in self.tracks:
+            values = np.asarray(rows.get(track, np.full(shape, np.nan)), dtype="f8")
+            if values.size != np.prod(shape):
+                raise ValueError(f"history rows of {track!r} have shape {values.shape}, expected {shape}")
+            arrays[track] = values.reshape(shape)
+        self.n_history += self._append_rows("history", arrays)
+
+    def write_energies(self, row):
+        """Append one energy row.
+
+        Collective; the data must be identical on all ranks.
+
+        Parameters
+        ----------
+        row : dict of str to float
+            Value of each energy column (``"time"`` included); columns left out are
+            stored as NaN.
+
+        Raises
+        ------
+        ValueError
+            For an unknown column.
+        """
+        unknown = sorted(set(row) - set(self.energy_columns))
+        if unknown:
+            raise ValueError(f"unknown energy columns {unknown}; known: {self.energy_columns}")
+        arrays = {c: np.array([row.get(c, np.nan)], dtype="f8") for c in self.energy_columns}
+        self.n_energies += self._append_rows("energies", arrays)
+
+    def flush(self):
+        """Flush the file to disk (collective)."""
+        if self._meta and self.file is not None:
+            self.file.flush()
+
+    def close(self):
+        """Flush and close the file (collective); further writes are errors."""
+        if self._meta and self.file is not None:
+            self.file.close()
+        self.file = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __repr__(self):
+        return (f"OutputFile({self.path!r}, mode={self.mode!r}, n_total={self.n_total}, "
+                f"frames={self.n_frames}, history={self.n_history}, energies={self.n_energies})")
+
+
+# ---------------------------------------------------------------------- reading
+def _opened(h5):
+    """Return (file, must_close) for a path or an open h5py.File."""
+    if isinstance(h5, h5py.File):
+        return h5, False
+    return h5py.File(h5, "r"), True
+
+
+def read_attrs(h5):
+    """Return the root attributes of a results file.
+
+    Parameters
+    ----------
+    h5 : str, os.PathLike or h5py.File
+        Results file.
+
+    Returns
+    -------
+    dict
+        Attribute values; strings decoded.
+    """
+    f, close = _opened(h5)
+    try:
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+    finally:
+        if close:
+            f.close()
+
+
+def read_frame(h5, index, fields=None):
+    """Read one frame (rows in id order; removed particles are NaN or -1).
+
+    Parameters
+    ----------
+    h5 : str, os.PathLike or h5py.File
+        Results file.
+    index : int
+        Frame index (negative counts from the end).
+    fields : list of str, optional
+        Fields to read; all when omitted.
+
+    Returns
+    -------
+    time : float
+    fields : dict of str to numpy.ndarray
+        Shape ``(n_total,) + trailing`` each.
+    """
+    f, close = _opened(h5)
+    try:
+        frames = f["frames"]
+        names = fields or [n for n in frames if n not in ("time", "step")]
+        return float(frames["time"][index]), {n: frames[n][index] for n in names}
+    finally:
+        if close:
+            f.close()
+
+
+def read_history(h5):
+    """Read the time histories of the tracked points.
+
+    Parameters
+    ----------
+    h5 : str, os.PathLike or h5py.File
+        Results file.
+
+    Returns
+    -------
+    times : numpy.ndarray, shape (S,)
+    tracks : dict of str to numpy.ndarray, shape (S, ncols)
+    columns : list of str
+    """
+    f, close = _opened(h5)
+    try:
+        hist = f["history"]
+        columns = [c.decode() if isinstance(c, bytes) else str(c) for c in hist.attrs["columns"]]
+        tracks = {n: hist[n][()] for n in hist if n != "time"}
+        return hist["time"][()], tracks, columns
+    finally:
+        if close:
+            f.close()
+
+
+def read_energies(h5):
+    """Read the energy columns.
+
+    Parameters
+    ----------
+    h5 : str, os.PathLike or h5py.File
+        Results file.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray, shape (E,)
+    """
+    f, close = _opened(h5)
+    try:
+        return {n: d[()] for n, d in f["energies"].items()}
+    finally:
+        if close:
+            f.close()

@@ -1,0 +1,212 @@
+"""Plots of a run: histories of the tracked points, energies, deformed shapes.
+
+Figures are drawn with matplotlib's Agg canvas directly (``matplotlib.figure.Figure``,
+no pyplot), so plotting works without a display and never switches the backend of
+a program that imported pmpm.
+
+Energy balance error
+--------------------
+With ``kinetic`` among the energy columns the balance is
+``B = kinetic + strain + plastic_work + damping_work - external_work`` (terms that
+are absent count as zero); otherwise the ``total`` column is used.  The plotted
+error is ``(B - B[0]) / scale`` with ``scale`` the largest magnitude of the stored
+energy or of the external work, so 0.01 means 1 % of the energy in play.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import h5py
+import numpy as np
+from matplotlib.figure import Figure
+
+from .hdf5 import read_attrs, read_energies, read_history
+
+__all__ = ["plot_results", "plot_deformed", "energy_balance_error"]
+
+logger = logging.getLogger(__name__)
+
+STORED = ("kinetic", "strain", "plastic_work", "damping_work")
+
+
+def _label(path, attrs):
+    """Return the legend label of a results file: its ``variant`` or its stem."""
+    variant = attrs.get("variant")
+    return str(variant) if variant else os.path.splitext(os.path.basename(path))[0]
+
+
+def _safe(name):
+    """Return ``name`` usable in a file name."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(name))
+
+
+def energy_balance_error(energies):
+    """Return the relative energy balance error of each energy row.
+
+    Parameters
+    ----------
+    energies : dict of str to numpy.ndarray
+        Energy columns (as from :func:`pmpm.io.read_energies`).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(B - B[0]) / scale`` (see the module docs), or None when neither
+        ``kinetic`` nor ``total`` is present or there are no rows.
+    """
+    n = len(energies.get("time", ()))
+    if n == 0:
+        return None
+    if "kinetic" in energies:
+        stored = sum(np.asarray(energies[c], float) for c in STORED if c in energies)
+        work = np.asarray(energies.get("external_work", np.zeros(n)), float)
+        balance = stored - work
+        scale = max(np.nanmax(np.abs(stored)), np.nanmax(np.abs(work)))
+    elif "total" in energies:
+        balance = np.asarray(energies["total"], float)
+        scale = np.nanmax(np.abs(balance))
+    else:
+        return None
+    scale = scale if np.isfinite(scale) and scale > 0 else 1.0
+    return (balance - balance[0]) / scale
+
+
+def _plot_track(track, runs, outdir):
+    """Draw every column of one track, one panel per column, all runs overlaid."""
+    columns = next(cols for _, _, tracks, cols in runs if track in tracks)
+    fig = Figure(figsize=(7, 2.2 * len(columns) + 0.6), layout="constrained")
+    axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
+    for label, times, tracks, cols in runs:
+        if track not in tracks:
+            continue
+        for ax, column in zip(axes, columns):
+            if column in cols:
+                ax.plot(times, tracks[track][:, cols.index(column)], label=label)
+    for ax, column in zip(axes, columns):
+        ax.set_ylabel(column)
+        ax.grid(True, alpha=0.3)
+    axes[0].set_title(f"history of {track}")
+    axes[0].legend(loc="best", fontsize="small")
+    axes[-1].set_xlabel("time")
+    path = os.path.join(outdir, f"history_{_safe(track)}.png")
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _plot_energies(label, energies, outdir):
+    """Draw the energy columns and the balance error of one run."""
+    time = energies["time"]
+    fig = Figure(figsize=(7, 6), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for name, values in energies.items():
+        if name != "time":
+            top.plot(time, values, label=name)
+    top.set_ylabel("energy")
+    top.set_title(f"energies: {label}")
+    top.legend(loc="best", fontsize="small")
+    top.grid(True, alpha=0.3)
+    error = energy_balance_error(energies)
+    if error is not None:
+        bottom.plot(time, error, color="k")
+    bottom.set_ylabel("relative balance error")
+    bottom.set_xlabel("time")
+    bottom.grid(True, alpha=0.3)
+    path = os.path.join(outdir, f"energies_{_safe(label)}.png")
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_results(h5_paths, outdir):
+    """Plot the track histories and the energies of one or more results files.
+
+    Parameters
+    ----------
+    h5_paths : list of str or os.PathLike
+        Results files; several files (e.g. elastic and elastoplastic variants of
+        one scene) are overlaid in the history plots, labelled by their ``variant``
+        attribute (else the file stem).
+    outdir : str or os.PathLike
+        Folder for the PNG files (created if needed).
+
+    Returns
+    -------
+    list of str
+        ``history_<track>.png`` for every track, then ``energies_<label>.png`` for
+        every file with energy rows.
+    """
+    outdir = os.fspath(outdir)
+    os.makedirs(outdir, exist_ok=True)
+    runs, energy_runs = [], []
+    for path in map(os.fspath, h5_paths):
+        label = _label(path, read_attrs(path))
+        times, tracks, columns = read_history(path)
+        runs.append((label, times, tracks, columns))
+        energy_runs.append((label, read_energies(path)))
+    track_names = list(dict.fromkeys(t for _, _, tracks, _ in runs for t in tracks))
+    pngs = [_plot_track(track, runs, outdir) for track in track_names]
+    pngs += [_plot_energies(label, e, outdir) for label, e in energy_runs if len(e.get("time", ()))]
+    logger.info("wrote %d plots to %s", len(pngs), outdir)
+    return pngs
+
+
+def _color_values(frames, index, name):
+    """Return (values, label) for ``name``: a field, or a component like ``sxx``."""
+    if name in frames:
+        values = frames[name][index].astype(float)
+        if values.ndim > 1:
+            # A multi-component field is coloured by its magnitude
+            return np.sqrt(np.sum(values.reshape(len(values), -1) ** 2, axis=1)), f"|{name}|"
+        return values, name
+    for field, dset in frames.items():
+        comps = [c.decode() if isinstance(c, bytes) else str(c) for c in dset.attrs.get("components", [])]
+        if name in comps:
+            return dset[index][:, comps.index(name)].astype(float), name
+    raise KeyError(f"no frame field or component named {name!r}; fields: {sorted(frames)}")
+
+
+def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
+    """Draw the particles of one frame with magnified displacements.
+
+    Parameters
+    ----------
+    h5_path : str or os.PathLike
+        Results file.
+    frame_index : int
+        Frame to draw (negative counts from the end).
+    color_field : str
+        Frame field (multi-component fields by magnitude) or component name
+        (``sxx``) giving the colour.
+    scale : float
+        Displacement magnification: particles are drawn at ``x0 + scale (x - x0)``
+        with ``x0`` the ``x0`` field if present, else the frame-0 positions.
+    out_png : str or os.PathLike
+        Image to write.
+
+    Returns
+    -------
+    str
+        ``out_png``.
+    """
+    with h5py.File(h5_path, "r") as f:
+        frames = f["frames"]
+        time = float(frames["time"][frame_index])
+        x = frames["x"][frame_index]
+        x0 = frames["x0"][frame_index] if "x0" in frames else frames["x"][0]
+        values, label = _color_values(frames, frame_index, color_field)
+    pos = x0 + scale * (x - x0)
+    alive = np.all(np.isfinite(pos), axis=1)
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    ax = fig.subplots()
+    size = float(np.clip(2.0e4 / max(alive.sum(), 1), 0.5, 20.0))
+    points = ax.scatter(pos[alive, 0], pos[alive, 1], c=values[alive], s=size, cmap="viridis",
+                        linewidths=0)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_title(f"t = {time:.6g}, displacements x {scale:g}")
+    fig.colorbar(points, ax=ax, label=label)
+    os.makedirs(os.path.dirname(os.path.abspath(out_png)), exist_ok=True)
+    fig.savefig(out_png, dpi=130)
+    return os.fspath(out_png)

@@ -1,0 +1,66 @@
+"""Linear elastic update against D of design.md section 5 (plane stress) and Lame (plane strain)."""
+import math
+
+import numpy as np
+import pytest
+
+from pmpm.errors import ConfigError
+from pmpm.materials import make_material
+
+E, NU, RHO = 210e9, 0.3, 7800.0
+
+
+def _mat(formulation):
+    return make_material({"type": "linear_elastic", "E": E, "nu": NU, "density": RHO}, "materials.s", formulation)
+
+
+def test_plane_stress_increment_is_D_de():
+    m = _mat("plane_stress")
+    D = E / (1 - NU ** 2) * np.array([[1, NU, 0], [NU, 1, 0], [0, 0, (1 - NU) / 2]])
+    de = np.random.default_rng(0).normal(scale=1e-4, size=(50, 3))
+    stress = np.zeros((50, 4))
+    m.update_stress(stress, de, {}, np.zeros(50, np.int32), -1)
+    np.testing.assert_allclose(stress[:, :3], de @ D.T, rtol=1e-13)
+    assert not stress[:, 3].any()
+
+
+def test_plane_strain_increment_has_out_of_plane_stress():
+    m = _mat("plane_strain")
+    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+    de = np.array([[1e-4, -2e-4, 3e-4]])
+    stress = np.zeros((1, 4))
+    m.update_stress(stress, de, {}, np.zeros(1, np.int32), -1)
+    tr = de[0, 0] + de[0, 1]
+    np.testing.assert_allclose(stress[0], [lam * tr + 2 * mu * de[0, 0], lam * tr + 2 * mu * de[0, 1],
+                                           mu * de[0, 2], NU * (stress[0, 0] + stress[0, 1])], rtol=1e-12)
+
+
+def test_only_the_selected_material_is_updated():
+    m = _mat("plane_stress")
+    stress = np.zeros((4, 4))
+    m.update_stress(stress, np.full((4, 3), 1e-4), {}, np.array([0, 1, 0, 1], np.int32), 1)
+    assert not stress[[0, 2]].any() and stress[[1, 3]].any()
+
+
+@pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
+def test_elastic_energy_density_is_half_sigma_epsilon(formulation):
+    m = _mat(formulation)
+    de = np.array([[2e-4, -1e-4, 5e-5]])
+    stress = np.zeros((1, 4))
+    m.update_stress(stress, de, {}, np.zeros(1, np.int32), -1)
+    work = 0.5 * (stress[0, 0] * de[0, 0] + stress[0, 1] * de[0, 1] + stress[0, 2] * de[0, 2])
+    assert m.elastic_energy_density(stress)[0] == pytest.approx(work, rel=1e-12)
+
+
+def test_wave_speeds():
+    assert _mat("plane_stress").wave_speed() == pytest.approx(math.sqrt(E / (RHO * (1 - NU ** 2))))
+    lam_2mu = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
+    assert _mat("plane_strain").wave_speed() == pytest.approx(math.sqrt(lam_2mu / RHO))
+
+
+@pytest.mark.parametrize("key,value", [("E", -1.0), ("density", 0.0), ("nu", 0.5), ("nu", -1.0)])
+def test_bad_parameters_name_the_key(key, value):
+    table = {"type": "linear_elastic", "E": E, "nu": NU, "density": RHO, key: value}
+    with pytest.raises(ConfigError) as err:
+        make_material(table, "materials.s", "plane_stress")
+    assert err.value.key == f"materials.s.{key}"
