@@ -371,9 +371,10 @@ def apply_overrides(data, overrides, where):
 
 def _flatten(overrides, prefix=""):
     """(dotted key, value) pairs: a bare dotted key (``solver.cfl = 0.3``) reaches TOML as nested
-    tables and must override that one key, not replace the whole ``[solver]`` table."""
+    tables and must override that one key, not replace the whole ``[solver]`` table. A quoted
+    dotted key with a table value (``"materials.steel" = {type = ...}``) replaces that table."""
     for key, value in overrides.items():
-        if isinstance(value, dict) and value:
+        if isinstance(value, dict) and value and "." not in key:
             yield from _flatten(value, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}", value

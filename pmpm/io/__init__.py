@@ -9,15 +9,16 @@
 - :mod:`pmpm.io.export`: :func:`export` to a VTU series (meshio).
 - :mod:`pmpm.io.plot`: :func:`plot_results`, :func:`plot_deformed`.
 
-``export`` and the plot functions are imported on first use: matplotlib and meshio
-cost most of a second to import, which every rank of a run would otherwise pay.
+matplotlib and meshio are imported inside the functions that need them: they cost
+most of a second to import, which every rank of a run would otherwise pay.
 """
 
-import importlib
 import logging
 
 from .checkpoint import checkpoint_paths, latest_checkpoint, read_checkpoint, write_checkpoint
+from .export import export
 from .hdf5 import OutputFile, read_attrs, read_energies, read_frame, read_history
+from .plot import energy_balance_error, plot_deformed, plot_results
 from .xdmf import write_xdmf
 
 __all__ = [
@@ -39,16 +40,3 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-_LAZY = {
-    "export": ".export",
-    "plot_results": ".plot",
-    "plot_deformed": ".plot",
-    "energy_balance_error": ".plot",
-}
-
-
-def __getattr__(name):
-    """Import the heavy post-processing functions on first access (PEP 562)."""
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name], __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -13,7 +13,6 @@ import os
 import xml.etree.ElementTree as ET
 
 import h5py
-import meshio
 import numpy as np
 
 from .xdmf import write_xdmf
@@ -27,6 +26,8 @@ FORMATS = ("vtu", "xdmf")
 
 def _frame_mesh(frames, index):
     """Return the meshio.Mesh of frame ``index`` (existing particles only)."""
+    import meshio  # here, not at module level: only post-processing pays its import
+
     x = frames["x"][index]
     alive = np.flatnonzero(np.all(np.isfinite(x), axis=1))
     # VTU points are 3-D; pad here rather than let meshio warn on every file
@@ -63,7 +64,7 @@ def _export_vtu(h5_path, outdir):
             if not np.isfinite(time):
                 continue  # cut short by a crash
             name = f"{stem}_{index:05d}.vtu"
-            meshio.write(os.path.join(outdir, name), _frame_mesh(frames, index), file_format="vtu")
+            _frame_mesh(frames, index).write(os.path.join(outdir, name), file_format="vtu")
             paths.append(os.path.join(outdir, name))
             entries.append((time, name))
     pvd = os.path.join(outdir, f"{stem}.pvd")

@@ -127,6 +127,9 @@ def _attr_value(value):
         arr = np.asarray(value)
         if arr.dtype.kind in "biuf" and arr.size:
             return arr
+        if arr.dtype.kind in "U" and arr.ndim == 1:
+            # Lists of names (e.g. column names) stay lists, not one JSON string
+            return np.array(list(value), dtype=h5py.string_dtype())
     return json_dumps(value)
 
 
@@ -440,25 +443,30 @@ class OutputFile:
         self.n_history += self._append_rows("history", arrays)
 
     def write_energies(self, row):
-        """Append one energy row.
+        """Append one energy row, or several at once.
 
         Collective; the data must be identical on all ranks.
 
         Parameters
         ----------
-        row : dict of str to float
-            Value of each energy column (``"time"`` included); columns left out are
-            stored as NaN.
+        row : dict of str to float or array_like
+            Value of each energy column (``"time"`` included), scalars for one row
+            or equal-length 1-D arrays for several; columns left out are NaN.
 
         Raises
         ------
         ValueError
-            For an unknown column.
+            For an unknown column or columns of different lengths.
         """
         unknown = sorted(set(row) - set(self.energy_columns))
         if unknown:
             raise ValueError(f"unknown energy columns {unknown}; known: {self.energy_columns}")
-        arrays = {c: np.array([row.get(c, np.nan)], dtype="f8") for c in self.energy_columns}
+        given = {c: np.atleast_1d(np.asarray(v, dtype="f8")) for c, v in row.items()}
+        lengths = {len(v) for v in given.values()}
+        if len(lengths) > 1:
+            raise ValueError(f"energy columns have different lengths: {sorted(lengths)}")
+        k = lengths.pop() if lengths else 1
+        arrays = {c: given.get(c, np.full(k, np.nan)) for c in self.energy_columns}
         self.n_energies += self._append_rows("energies", arrays)
 
     def flush(self):

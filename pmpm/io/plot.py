@@ -6,11 +6,13 @@ a program that imported pmpm.
 
 Energy balance error
 --------------------
-With ``kinetic`` among the energy columns the balance is
-``B = kinetic + strain + plastic_work + damping_work - external_work`` (terms that
-are absent count as zero); otherwise the ``total`` column is used.  The plotted
-error is ``(B - B[0]) / scale`` with ``scale`` the largest magnitude of the stored
-energy or of the external work, so 0.01 means 1 % of the energy in play.
+The balance is ``B = kinetic + internal_work - external_work`` when an
+``internal_work`` column (the integrated stress power: stored strain energy plus
+dissipation) is present, else ``B = kinetic + strain + plastic_work + damping_work -
+external_work`` (absent terms count as zero), else the ``total`` column.  The
+plotted error is ``(B - B[0]) / scale`` with ``scale`` the largest magnitude of the
+energy held by the body (kinetic + internal) or of the external work, so 0.01 means
+1 % of the energy in play.
 """
 
 from __future__ import annotations
@@ -20,7 +22,6 @@ import os
 
 import h5py
 import numpy as np
-from matplotlib.figure import Figure
 
 from .hdf5 import read_attrs, read_energies, read_history
 
@@ -29,6 +30,14 @@ __all__ = ["plot_results", "plot_deformed", "energy_balance_error"]
 logger = logging.getLogger(__name__)
 
 STORED = ("kinetic", "strain", "plastic_work", "damping_work")
+DISPLACEMENTS = ("ux", "uy", "uz")
+
+
+def _new_figure(**kwargs):
+    """Return a new ``matplotlib.figure.Figure`` (imported here: only plotting pays for it)."""
+    from matplotlib.figure import Figure as _Figure
+
+    return _Figure(**kwargs)
 
 
 def _label(path, attrs):
@@ -59,13 +68,16 @@ def energy_balance_error(energies):
     n = len(energies.get("time", ()))
     if n == 0:
         return None
-    if "kinetic" in energies:
-        stored = sum(np.asarray(energies[c], float) for c in STORED if c in energies)
-        work = np.asarray(energies.get("external_work", np.zeros(n)), float)
-        balance = stored - work
-        scale = max(np.nanmax(np.abs(stored)), np.nanmax(np.abs(work)))
-    elif "total" in energies:
-        balance = np.asarray(energies["total"], float)
+    columns = {k: np.asarray(v, dtype=float) for k, v in energies.items()}
+    work = columns.get("external_work", np.zeros(n))
+    if "kinetic" in columns:
+        # internal_work, when given, already holds strain energy plus dissipation
+        held_terms = ("internal_work",) if "internal_work" in columns else STORED[1:]
+        held = columns["kinetic"] + sum(columns[c] for c in held_terms if c in columns)
+        balance = held - work
+        scale = max(np.nanmax(np.abs(held)), np.nanmax(np.abs(work)))
+    elif "total" in columns:
+        balance = columns["total"]
         scale = np.nanmax(np.abs(balance))
     else:
         return None
@@ -74,9 +86,11 @@ def energy_balance_error(energies):
 
 
 def _plot_track(track, runs, outdir):
-    """Draw every column of one track, one panel per column, all runs overlaid."""
+    """Draw the displacement columns of one track, one panel each, all runs overlaid."""
     columns = next(cols for _, _, tracks, cols in runs if track in tracks)
-    fig = Figure(figsize=(7, 2.2 * len(columns) + 0.6), layout="constrained")
+    # Displacements are what a history is read for; other columns only without them
+    columns = [c for c in columns if c in DISPLACEMENTS] or columns
+    fig = _new_figure(figsize=(7, 2.2 * len(columns) + 0.6), layout="constrained")
     axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
     for label, times, tracks, cols in runs:
         if track not in tracks:
@@ -98,7 +112,7 @@ def _plot_track(track, runs, outdir):
 def _plot_energies(label, energies, outdir):
     """Draw the energy columns and the balance error of one run."""
     time = energies["time"]
-    fig = Figure(figsize=(7, 6), layout="constrained")
+    fig = _new_figure(figsize=(7, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for name, values in energies.items():
         if name != "time":
@@ -126,7 +140,8 @@ def plot_results(h5_paths, outdir):
     h5_paths : list of str or os.PathLike
         Results files; several files (e.g. elastic and elastoplastic variants of
         one scene) are overlaid in the history plots, labelled by their ``variant``
-        attribute (else the file stem).
+        attribute (else the file stem).  A track's plot shows its displacement
+        columns (``ux``, ``uy``) against time, or every column if it has none.
     outdir : str or os.PathLike
         Folder for the PNG files (created if needed).
 
@@ -197,7 +212,7 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
         values, label = _color_values(frames, frame_index, color_field)
     pos = x0 + scale * (x - x0)
     alive = np.all(np.isfinite(pos), axis=1)
-    fig = Figure(figsize=(8, 5), layout="constrained")
+    fig = _new_figure(figsize=(8, 5), layout="constrained")
     ax = fig.subplots()
     size = float(np.clip(2.0e4 / max(alive.sum(), 1), 0.5, 20.0))
     points = ax.scatter(pos[alive, 0], pos[alive, 1], c=values[alive], s=size, cmap="viridis",

@@ -100,7 +100,8 @@ def expected_frame(n_total, missing=()):
 
 def new_output(path, n_total, mode="mpio", **kwargs):
     """Create (or reopen) a results file with the test layout."""
-    return OutputFile(path, comm, {"scene": {"name": "test", "dx": 0.1}, "variant": "elastic"},
+    attrs = {"scene": {"name": "test", "dx": 0.1}, "variant": "elastic", "history_columns": HISTORY_COLUMNS}
+    return OutputFile(path, comm, attrs,
                       n_total, FRAME_FIELDS, TRACKS, HISTORY_COLUMNS, ENERGY_COLUMNS,
                       mode=mode, **kwargs)
 
@@ -134,6 +135,7 @@ def test_frame_with_empty_rank_reads_back_in_id_order(shared_dir, mode, n_total)
             assert list(f["frames/time"][()]) == [0.0, 0.5]
             assert list(f["frames/step"][()]) == [0, 10]
             assert f.attrs["variant"] == "elastic" and '"dx": 0.1' in f.attrs["scene"]
+            assert list(f.attrs["history_columns"]) == HISTORY_COLUMNS
             assert list(f["frames/stress"].attrs["components"]) == ["sxx", "syy", "sxy", "szz"]
             for name in FRAME_FIELDS:
                 got = f["frames"][name][()]
@@ -189,7 +191,9 @@ def test_history_and_energies_append(shared_dir, mode):
         out.write_history([0.3], rows2)
         for i in range(3):
             out.write_energies({"time": 0.1 * i, "kinetic": 1.0 + i, "external_work": 2.0 * i})
-        assert everywhere((out.n_history, out.n_energies) == (3, 3))
+        # Several rows in one call
+        out.write_energies({"time": [0.3, 0.4], "kinetic": [4.0, 5.0]})
+        assert everywhere((out.n_history, out.n_energies) == (3, 5))
 
     def check():
         times, tracks, columns = read_history(path)
@@ -199,7 +203,8 @@ def test_history_and_energies_append(shared_dir, mode):
         assert np.isnan(tracks["base"][2]).all() and (tracks["base"][:2] == 0).all()
         energies = read_energies(path)
         assert sorted(energies) == sorted(ENERGY_COLUMNS)
-        np.testing.assert_allclose(energies["kinetic"], [1, 2, 3])
+        np.testing.assert_allclose(energies["kinetic"], [1, 2, 3, 4, 5])
+        assert np.isnan(energies["external_work"][3:]).all()
         return np.isnan(energies["strain"]).all()
 
     assert on_root(check)

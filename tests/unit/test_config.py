@@ -418,13 +418,29 @@ def test_bad_velocity_expression(tmp_path):
     assert err.key == "bodies[0].velocity"
 
 
-def test_i_section_too_coarse_for_its_particles(tmp_path):
-    # 3 point rows across the depth cannot carry the second moment with positive thicknesses
-    isec = {"shape": "i_section", "material": "steel", "start": [0.5, 1.0], "end": [3.5, 1.0],
-            "depth": 0.6, "flange_width": 0.3, "flange_thickness": 0.03, "web_thickness": 0.02,
-            "particles_per_cell": 1}
+@pytest.mark.parametrize("depth,ppc", [(0.6, 1),    # one point row: singular
+                                       (1.5, 1)])   # three rows: the web would need negative mass
+def test_i_section_too_coarse_for_its_particles(tmp_path, depth, ppc):
+    isec = {"shape": "i_section", "material": "steel", "start": [0.25, 1.0], "end": [3.75, 1.0],
+            "depth": depth, "flange_width": 0.8, "flange_thickness": 0.1, "web_thickness": 0.05,
+            "particles_per_cell": ppc}
     err = solver_error(scene_data(bodies=[isec]), tmp_path)
     assert err.key == "bodies[0].depth" and "positive thicknesses" in err.reason
+
+
+def test_i_section_matches_area_and_second_moment():
+    import numpy as np
+    from pmpm.bodies import body_points
+    from pmpm.grid import Grid
+    isec = {"shape": "i_section", "material": "steel", "start": [0.25, 1.0], "end": [3.75, 1.0],
+            "depth": 1.5, "flange_width": 0.8, "flange_thickness": 0.1, "web_thickness": 0.05,
+            "particles_per_cell": 2}
+    body = parse_scene(scene_data(bodies=[isec])).bodies[0]
+    pts, vol = body_points(body, Grid((0, 0), 0.5, (8, 4)), ".")
+    A = 2 * 0.8 * 0.1 + 1.3 * 0.05
+    I = (0.8 * 1.5 ** 3 - 0.75 * 1.3 ** 3) / 12
+    assert np.all(vol > 0)
+    assert np.isclose(vol.sum() / 3.5, A) and np.isclose(np.sum(vol * (pts[:, 1] - 1.0) ** 2) / 3.5, I)
 
 
 @pytest.mark.parametrize("name,content", [

@@ -1,0 +1,174 @@
+"""XDMF sidecar and VTU export of a small results file (serial).
+
+The sidecar is checked against the HDF5 file itself: every HDF DataItem must name an
+existing dataset with the stated Dimensions and number type, and every HyperSlab,
+evaluated with h5py, must give exactly the frame data its Attribute (or Geometry)
+claims to be.
+"""
+
+import os
+import xml.etree.ElementTree as ET
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pmpm.io import OutputFile, export, write_xdmf
+from pmpm.io.xdmf import xdmf_number_type
+
+N_TOTAL = 7
+MISSING = 5
+FRAME_FIELDS = {
+    "x": ((2,), "f8"),
+    "v": ((2,), "f8"),
+    "stress": ((4,), "f8"),
+    "strain": ((3,), "f8"),
+    "mat": ((), "i4"),
+    "eps_p_eq": ((), "f8"),
+}
+TIMES = [0.0, 0.125, 0.25]
+
+
+def particles(frame, ids):
+    """Deterministic particle fields of one frame."""
+    f = ids.astype(float) + 10.0 * frame
+    return {
+        "id": ids,
+        "x": np.stack([f, 0.5 * f], axis=1),
+        "v": np.stack([-f, f], axis=1),
+        "stress": f[:, None] * np.array([1.0, 2.0, 3.0, 4.0]),
+        "strain": f[:, None] * np.array([0.1, 0.2, 0.3]),
+        "mat": (ids % 2).astype(np.int32),
+        "eps_p_eq": 1e-3 * f,
+    }
+
+
+@pytest.fixture
+def results(tmp_path):
+    """A results file with three frames; particle MISSING is removed after frame 0."""
+    path = tmp_path / "run" / "res.h5"
+    path.parent.mkdir()
+    ids = np.arange(N_TOTAL, dtype=np.int64)[::-1].copy()
+    with OutputFile(path, MPI.COMM_SELF, {"scene": "{}"}, N_TOTAL, FRAME_FIELDS, [], [],
+                    ["time"]) as out:
+        for frame, time in enumerate(TIMES):
+            alive = ids if frame == 0 else ids[ids != MISSING]
+            out.write_frame(time, frame, particles(frame, alive))
+    return str(path)
+
+
+def _ints(text):
+    return [int(v) for v in text.split()]
+
+
+def _heavy_dataset(item, xdmf_dir, f):
+    """Check one HDF DataItem against the file and return its dataset."""
+    file_name, dset_path = item.text.strip().split(":")
+    assert os.path.samefile(os.path.join(xdmf_dir, file_name), f.filename)
+    assert dset_path in f, dset_path
+    dset = f[dset_path]
+    assert _ints(item.get("Dimensions")) == list(dset.shape)
+    assert (item.get("NumberType"), item.get("Precision")) == xdmf_number_type(dset.dtype)
+    return dset
+
+
+def _evaluate(item, xdmf_dir, f):
+    """Return the values a DataItem (plain HDF or HyperSlab) stands for."""
+    if item.get("ItemType") != "HyperSlab":
+        return _heavy_dataset(item, xdmf_dir, f)[()]
+    select, heavy = list(item)
+    assert select.get("Format") == "XML"
+    dset = _heavy_dataset(heavy, xdmf_dir, f)
+    start, stride, count = np.array(_ints(select.text)).reshape(3, dset.ndim)
+    assert _ints(select.get("Dimensions")) == [3, dset.ndim]
+    assert np.all(start + (count - 1) * stride < dset.shape)
+    index = tuple(slice(s, s + c * st, st) for s, st, c in zip(start, stride, count))
+    values = dset[index]
+    dims = _ints(item.get("Dimensions"))
+    assert values.size == np.prod(dims)
+    return values.reshape(dims)
+
+
+def _expected(f, frame, name):
+    """The frame data an Attribute named ``name`` should hold."""
+    frames = f["frames"]
+    if name in frames:
+        return frames[name][frame]
+    for field, dset in frames.items():
+        comps = [c.decode() if isinstance(c, bytes) else c for c in dset.attrs.get("components", [])]
+        if name in comps:
+            return dset[frame][:, comps.index(name)]
+    raise AssertionError(f"attribute {name} matches no frame field")
+
+
+def test_xdmf_references_match_the_hdf5_file(results):
+    xdmf = write_xdmf(results)
+    assert xdmf.endswith("res.xdmf")
+    root = ET.parse(xdmf).getroot()
+    assert root.tag == "Xdmf" and root.get("Version") == "3.0"
+    collection = root.find("Domain/Grid")
+    assert collection.get("GridType") == "Collection" and collection.get("CollectionType") == "Temporal"
+    grids = collection.findall("Grid")
+    xdmf_dir = os.path.dirname(xdmf)
+    with h5py.File(results, "r") as f:
+        np.testing.assert_array_equal([float(g.find("Time").get("Value")) for g in grids],
+                                      f["frames/time"][()])
+        for frame, grid in enumerate(grids):
+            topo = grid.find("Topology")
+            assert topo.get("TopologyType") == "Polyvertex" and int(topo.get("NumberOfElements")) == N_TOTAL
+            np.testing.assert_array_equal(_evaluate(topo.find("DataItem"), xdmf_dir, f), np.arange(N_TOTAL))
+            geom = grid.find("Geometry")
+            assert geom.get("GeometryType") == "XY"
+            np.testing.assert_array_equal(_evaluate(geom.find("DataItem"), xdmf_dir, f), f["frames/x"][frame])
+            names = []
+            for attr in grid.findall("Attribute"):
+                names.append(attr.get("Name"))
+                got = _evaluate(attr.find("DataItem"), xdmf_dir, f)
+                np.testing.assert_array_equal(got, _expected(f, frame, attr.get("Name")))
+                kind = {1: "Scalar", 2: "Vector"}[got.ndim if got.ndim == 1 else got.shape[1]]
+                assert attr.get("AttributeType") == kind and attr.get("Center") == "Node"
+            assert {"sxx", "syy", "sxy", "szz", "exx", "eyy", "gxy", "v", "x", "mat"} <= set(names)
+    # The removed particle reads NaN from frame 1 on
+    with h5py.File(results, "r") as f:
+        assert np.isnan(f["frames/x"][1, MISSING]).all() and f["frames/mat"][2, MISSING] == -1
+
+
+def test_xdmf_skips_frames_cut_short(results, tmp_path):
+    with h5py.File(results, "r+") as f:
+        for dset in f["frames"].values():
+            dset.resize(dset.shape[0] + 1, axis=0)  # time stays NaN
+    target = tmp_path / "elsewhere" / "side.xdmf"
+    target.parent.mkdir()
+    write_xdmf(results, target)
+    grids = ET.parse(target).getroot().findall("Domain/Grid/Grid")
+    assert len(grids) == len(TIMES)
+    # The file name is relative to the sidecar
+    assert grids[0].find("Geometry//DataItem[@Format='HDF']").text.startswith("../run/res.h5:")
+
+
+def test_export_vtu_round_trip(results, tmp_path):
+    paths = export(results, "vtu", tmp_path / "vtu")
+    assert len(paths) == len(TIMES) + 1 and paths[-1].endswith("res.pvd")
+    entries = ET.parse(paths[-1]).getroot().findall("Collection/DataSet")
+    assert [float(e.get("timestep")) for e in entries] == TIMES
+    with h5py.File(results, "r") as f:
+        for frame, path in enumerate(paths[:-1]):
+            assert os.path.basename(path) == entries[frame].get("file")
+            mesh = meshio.read(path)
+            x = f["frames/x"][frame]
+            alive = np.flatnonzero(np.isfinite(x[:, 0]))
+            assert len(alive) == (N_TOTAL if frame == 0 else N_TOTAL - 1)
+            np.testing.assert_array_equal(mesh.points[:, :2], x[alive])
+            assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(alive)
+            np.testing.assert_array_equal(mesh.point_data["id"], alive)
+            for name in FRAME_FIELDS:
+                np.testing.assert_array_equal(mesh.point_data[name], f["frames"][name][frame][alive])
+
+
+def test_export_other_formats(results, tmp_path):
+    (xdmf,) = export(results, "xdmf", tmp_path / "x")
+    assert os.path.exists(xdmf) and ET.parse(xdmf).getroot().tag == "Xdmf"
+    with pytest.raises(ValueError, match="unknown export format"):
+        export(results, "vtk")
