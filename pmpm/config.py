@@ -363,8 +363,10 @@ def apply_overrides(data, overrides, where):
                 node = node.setdefault(part, {})
             else:
                 raise ConfigError(f"{where}.{dotted}", f"{part!r} is inside a value that is not a table")
-        if not isinstance(node, dict):
+        if isinstance(node, list):
             raise ConfigError(f"{where}.{dotted}", "cannot override a whole list entry")
+        if not isinstance(node, dict):
+            raise ConfigError(f"{where}.{dotted}", f"{parts[-2]!r} is not a table")
         node[parts[-1]] = value
     return data
 

@@ -130,8 +130,7 @@ class Run:
         rows = np.array(self.history_rows)  # (S, tracks, cols)
         self.output.write_history(np.array(self.history_t),
                                   {name: rows[:, k, :] for k, name in enumerate(self.tracker.names)})
-        for row in self.energy_rows:
-            self.output.write_energies(dict(zip(ENERGY_COLUMNS, row)))
+        self.output.write_energies(dict(zip(ENERGY_COLUMNS, np.array(self.energy_rows).T)))
         self.history_t, self.history_rows, self.energy_rows = [], [], []
 
     def write_frame(self):

@@ -23,8 +23,10 @@ is 1, 2 and 2 node columns (a particle in cell c touches nodes c-1 .. c+2 at mos
 import math
 
 import numba as nb
+from numba.extending import overload
 
-__all__ = ["SHAPES", "linear", "quadratic", "cubic", "ghost_width", "min_cells"]
+__all__ = ["SHAPES", "SHAPE_TAGS", "weights", "linear", "quadratic", "cubic", "ghost_width",
+           "min_cells"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -92,6 +94,29 @@ def cubic(s, n):
 
 #: name in the scene -> kernel
 SHAPES = {"linear": linear, "quadratic": quadratic, "cubic": cubic}
+
+#: name in the scene -> the tag the transfer kernels receive. The tag's *type* (a tuple of 2, 3
+#: or 4 floats) selects the basis when numba compiles a kernel, so each basis gets its own
+#: specialised, cacheable machine code. (Passing the jitted function itself would work too,
+#: but its type embeds a memory address and defeats numba's on-disk cache.)
+SHAPE_TAGS = {"linear": (0.0,) * 2, "quadratic": (0.0,) * 3, "cubic": (0.0,) * 4}
+
+
+def weights(tag, s, n):
+    """``start, w, g`` of the basis named by ``tag`` (see ``SHAPE_TAGS``)."""
+    return {2: linear, 3: quadratic, 4: cubic}[len(tag)](s, n)
+
+
+@overload(weights, inline="always")
+def _weights_overload(tag, s, n):
+    count = tag.count
+    if count == 2:
+        return lambda tag, s, n: linear(s, n)
+    if count == 3:
+        return lambda tag, s, n: quadratic(s, n)
+    if count == 4:
+        return lambda tag, s, n: cubic(s, n)
+    return None
 
 
 def ghost_width(name):

@@ -25,7 +25,7 @@ from .loads import Loads
 from .materials import make_material
 from .schemes import make_scheme
 from .setup_particles import choose_axis, create_particles, make_decomposition
-from .shape import SHAPES, ghost_width, min_cells
+from .shape import SHAPE_TAGS, ghost_width, min_cells
 from .errors import ConfigError
 
 __all__ = ["Solver"]
@@ -49,7 +49,7 @@ class Solver:
         if min(self.grid.cells) < min_cells(cfg.shape_function):
             raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines need at least "
                                             f"{min_cells(cfg.shape_function)} cells per axis")
-        self.shape = SHAPES[cfg.shape_function]
+        self.shape = SHAPE_TAGS[cfg.shape_function]
         self.labels = list(scene.materials)
         self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
                           for k in self.labels]

@@ -21,7 +21,8 @@ Root attributes
     Time histories of tracked points; each track's ``columns`` attribute names
     its columns (also stored on ``/history``).
 ``/energies/<column>`` (E,) float64
-    Energy balance rows; ``time`` is always one of the columns.
+    Energy balance rows; ``time`` is always one of the columns.  As for frames, the
+    time of history and energy rows is written last, so NaN marks a cut-short row.
 
 Parallel writing
 ----------------
@@ -219,7 +220,7 @@ class OutputFile:
         if mode not in MODES:
             raise ValueError(f"unknown output mode {mode!r}; valid modes: {', '.join(MODES)}")
         if mode == "mpio" and self.size > 1 and not mpio_available():
-            logger.warning("h5py has no parallel HDF5: writing %s in 'gather' mode", "results")
+            logger.warning("h5py has no parallel HDF5 (driver 'mpio'): using mode 'gather'")
             return "gather"
         return mode
 
@@ -255,8 +256,13 @@ class OutputFile:
             self.file = None
         if error is not None:
             raise error
+        # The other ranks raise the failing rank's exception type, so callers can catch it
         exc_type, text = failed[0][1]
-        raise exc_type(f"rank {failed[0][0]}: {text}")
+        try:
+            exc = exc_type(f"rank {failed[0][0]}: {text}")
+        except Exception:
+            exc = RuntimeError(f"rank {failed[0][0]}: {exc_type.__name__}: {text}")
+        raise exc
 
     def _open(self, h5mode):
         """Open the file on the ranks that touch it."""
@@ -353,6 +359,12 @@ class OutputFile:
                 problems.append(f"history track {track!r} missing or of another width")
         problems += [f"energy column {c!r} missing" for c in self.energy_columns
                      if f"energies/{c}" not in f]
+        # Datasets this writer would not extend would fall out of step with the time axis
+        for group, names in (("frames", ["time", "step", *self.frame_specs]),
+                             ("history", ["time", *self.tracks]), ("energies", self.energy_columns)):
+            extra = sorted(set(f[group]) - set(names))
+            if extra:
+                problems.append(f"/{group} has datasets this run does not write: {extra}")
         if problems:
             raise ValueError(f"{self.path} does not match the run's output layout: " + "; ".join(problems))
 
@@ -397,7 +409,7 @@ class OutputFile:
         self.n_frames = index + 1
 
     def _append_rows(self, group, arrays):
-        """Grow every dataset of ``group`` by the rows in ``arrays``; rank 0 writes."""
+        """Grow every dataset of ``group`` by the rows in ``arrays``; rank 0 writes them."""
         k = len(next(iter(arrays.values())))
         check_all(self.comm, self.comm.bcast(k) == k, f"{k} rows here, another count on rank 0")
         if not self._meta:
@@ -407,8 +419,9 @@ class OutputFile:
         for name in arrays:
             grp[name].resize(old + k, axis=0)
         if self.rank == 0:
-            for name, values in arrays.items():
-                grp[name][old:old + k] = values
+            # time last, as for frames: rows with a NaN time were cut short
+            for name in sorted(arrays, key=lambda n: n == "time"):
+                grp[name][old:old + k] = arrays[name]
         self.file.flush()
         return k
 

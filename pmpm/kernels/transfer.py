@@ -6,6 +6,8 @@ one step use the same weights (as CB-Geo MPM does), and recomputing is cheaper t
 """
 import numba as nb
 
+from ..shape import weights
+
 __all__ = ["p2g", "g2p_velocity", "g2p_kinematics"]
 
 
@@ -34,8 +36,8 @@ def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
     for p in range(x.shape[0]):
         sx = (x[p, 0] - origin[0]) * inv_h
         sy = (x[p, 1] - origin[1]) * inv_h
-        i0, wx, gx = shape(sx, ncx)
-        j0, wy, gy = shape(sy, ncy)
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
         mp = m[p]
         if v is not None:
             mvx = mp * v[p, 0]
@@ -81,8 +83,8 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap)
     for p in range(x.shape[0]):
         sx = (x[p, 0] - origin[0]) * inv_h
         sy = (x[p, 1] - origin[1]) * inv_h
-        i0, wx, gx = shape(sx, ncx)
-        j0, wy, gy = shape(sy, ncy)
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
         dvx = 0.0
         dvy = 0.0
         vx = 0.0
@@ -132,8 +134,8 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, move, dt,
     for p in range(x.shape[0]):
         sx = (x[p, 0] - origin[0]) * inv_h
         sy = (x[p, 1] - origin[1]) * inv_h
-        i0, wx, gx = shape(sx, ncx)
-        j0, wy, gy = shape(sy, ncy)
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
         lxx = 0.0
         lxy = 0.0
         lyx = 0.0

@@ -7,6 +7,8 @@ a load box with no particle and a bad mesh file are found when the solver builds
 import copy
 import json
 import math
+import re
+from pathlib import Path
 
 import pytest
 from mpi4py import MPI
@@ -529,6 +531,26 @@ def test_variants_overrides_applied(tmp_path):
     assert only.variant == "soft" and only.solver.cfl == 0.25
 
 
+def test_quoted_dotted_key_replaces_a_whole_table(tmp_path):
+    case = tmp_path / "case.toml"
+    case.write_text(BASE_TOML + """
+[variants.plastic]
+"materials.steel" = { type = "bilinear_vonmises", E = 200.0, nu = 0.3, density = 2.0, yield_stress = 1.0, hardening = 0.01 }
+[variants.merged]
+materials.steel = { E = 300.0 }
+[variants.typo]
+"solvr.cfl" = 0.3
+""")
+    plastic = load_scene(str(case), "plastic")[0]
+    assert plastic.materials["steel"] == {"type": "bilinear_vonmises", "E": 200.0, "nu": 0.3, "density": 2.0,
+                                          "yield_stress": 1.0, "hardening": 0.01}
+    merged = load_scene(str(case), "merged")[0]
+    assert merged.materials["steel"] == dict(BASE["materials"]["steel"], E=300.0)
+    with pytest.raises(ConfigError) as info:
+        load_scene(str(case), "typo")
+    assert info.value.key == "solvr" and "unknown key" in info.value.reason
+
+
 def test_variant_errors(tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(VARIANTS)
@@ -543,7 +565,37 @@ def test_variant_errors(tmp_path):
     with pytest.raises(ConfigError) as info:
         load_scene(str(case))
     assert info.value.key == "variants.soft.bodies.3.upper"
+    case.write_text(VARIANTS + '"solver.end_time.x" = 1.0\n')
+    with pytest.raises(ConfigError) as info:
+        load_scene(str(case))
+    assert info.value.key == "variants.soft.solver.end_time.x" and "not a table" in info.value.reason
     case.write_text(BASE_TOML)
     with pytest.raises(ConfigError) as info:
         load_scene(str(case), "soft")
     assert info.value.key == "variants"
+
+
+# -- the examples of docs/scenes.md ----------------------------------------------------------------
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "scenes.md"
+
+
+def _doc_blocks():
+    return re.findall(r"```toml\n(.*?)```", DOC.read_text(), re.S)
+
+
+@pytest.mark.skipif(not DOC.exists(), reason="docs/scenes.md not present")
+def test_documented_examples_are_valid(tmp_path):
+    blocks = _doc_blocks()
+    (complete,) = [b for b in blocks if b.startswith("# complete example")]
+    case = tmp_path / "block.toml"
+    case.write_text(complete)
+    (scene,) = load_scene(str(case))
+    assert scene.output.directory == "block_results"
+    (variants,) = [b for b in blocks if "[variants." in b]
+    case.write_text(BASE_TOML + "\n" + variants)
+    base, soft, plastic = load_scene(str(case))
+    assert (base.variant, soft.variant, plastic.variant) == ("base", "soft", "plastic")
+    assert soft.materials["steel"]["E"] == 100.0e9 and soft.solver.cfl == 0.3
+    assert soft.bodies[0].geometry["upper"] == (3.0, 0.5)
+    assert plastic.materials["steel"]["type"] == "bilinear_vonmises"

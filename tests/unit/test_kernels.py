@@ -5,7 +5,7 @@ import pytest
 
 from pmpm import kernels as K
 from pmpm.kernels.reference import g2p_velocity_reference, p2g_reference
-from pmpm.shape import SHAPES
+from pmpm.shape import SHAPE_TAGS, SHAPES
 
 ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
 CELLS = (9, 6)
@@ -30,7 +30,7 @@ def test_p2g_matches_reference(name):
     load_vec = np.array([[1.0, 2.0], [-3.0, 0.5]])
     G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
     K.p2g(p["x"], p["m"], p["v"], p["vol"], p["stress"], gravity, p["load_id"], p["load_w"], load_vec,
-          G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPES[name])
+          G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
     fext = p["m"][:, None] * gravity + np.where(p["load_id"][:, None] >= 0,
                                                 p["load_w"][:, None] * load_vec[p["load_id"]], 0.0)
     mass, mom, force = p2g_reference(ORDER[name], p["x"], p["m"], p["v"], p["vol"], p["stress"], fext,
@@ -52,7 +52,7 @@ def test_p2g_on_a_window_equals_the_slice_of_the_full_grid(name):
     win = np.zeros((6 + 2 - 1 + 1, CELLS[1] + 1, K.N_FIELDS))  # columns 1 .. 8
     for G, ox in ((full, 0), (win, 1)):
         K.p2g(p["x"], p["m"], p["v"], p["vol"], p["stress"], None, None, None, None,
-              G, ox, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPES[name])
+              G, ox, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
     np.testing.assert_array_equal(full[1:9], win)
     assert not full[:1].any() and not full[9:].any()
 
@@ -67,7 +67,7 @@ def test_g2p_velocity_matches_reference(name, pic):
     vel, dvel = G[..., 1:3].copy(), G[..., 3:5].copy()
     v = p["v"].copy()
     vmax, bad = K.g2p_velocity(p["x"], p["m"], v, pic, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1],
-                               SHAPES[name], True)
+                               SHAPE_TAGS[name], True)
     ref = g2p_velocity_reference(ORDER[name], p["x"], p["v"], vel, dvel, pic, ORIGIN, H, CELLS)
     np.testing.assert_allclose(v, ref, rtol=1e-12, atol=1e-12)
     assert vmax == pytest.approx(np.sqrt((ref ** 2).sum(1)).max(), rel=1e-12) and bad == 0
@@ -99,9 +99,9 @@ def test_none_effects_compile_out_and_match_zero_effects():
     a = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
     b = np.zeros_like(a)
     K.p2g(p["x"], p["m"], p["v"], p["vol"], p["stress"], None, None, None, None,
-          a, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPES["cubic"])
+          a, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS["cubic"])
     K.p2g(p["x"], p["m"], p["v"], p["vol"], p["stress"], np.zeros(2), np.full(len(p["m"]), -1, np.int32),
-          p["load_w"], np.zeros((1, 2)), b, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPES["cubic"])
+          p["load_w"], np.zeros((1, 2)), b, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS["cubic"])
     np.testing.assert_array_equal(a, b)
 
 
