@@ -107,7 +107,7 @@ def weights(tag, s, n):
     return {2: linear, 3: quadratic, 4: cubic}[len(tag)](s, n)
 
 
-@overload(weights, inline="always")
+@overload(weights)
 def _weights_overload(tag, s, n):
     count = tag.count
     if count == 2:

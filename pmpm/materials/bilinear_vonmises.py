@@ -45,8 +45,6 @@ from .linear_elastic import elastic_increment
 
 __all__ = ["BilinearVonMises"]
 
-# Newton stops when Phi is within this fraction of sigma_y (round-off level for float64 stresses).
-_RTOL = 1e-13
 # below this Phi/sigma_y - 1 one more Newton step lands at round-off (the error squares each step)
 _LAST_STEP = 1e-7
 _MAXIT = 50
@@ -91,26 +89,28 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
             # invariants of the trial relative stress in the common eigenbasis of D and P
             a2 = 0.25 * (xx + yy) ** 2
             b2 = 0.75 * (xx - yy) ** 2 + 3.0 * xy * xy
-            dl = 0.0
+            # first Newton step from d_lambda = 0 reuses the trial Phi^2 (= f2 there)
+            excess = math.sqrt(phi2) / sy - 1.0
+            dl = phi2 * excess / (a2 * pa + b2 * pb)
             for _ in range(_MAXIT):
+                if excess <= _LAST_STEP:
+                    # quadratic convergence: the error after the step just taken is O(excess^2),
+                    # at round-off, so skip the evaluation that would only confirm it
+                    break
                 u = 1.0 + pa * dl
                 v = 1.0 + pb * dl
                 iuv = 1.0 / (u * v)  # one division for both scale factors
                 ia = v * iuv
                 ib = u * iuv
                 f2 = a2 * ia * ia + b2 * ib * ib
-                excess = math.sqrt(f2) / sy - 1.0  # Phi / sigma_y - 1 >= 0 (monotone from above)
-                if excess <= _RTOL:
-                    break
+                excess = math.sqrt(f2) / sy - 1.0  # Phi / sigma_y - 1 >= 0 (decreases to 0)
                 # Newton on q = 1/Phi - 1/sigma_y:  q / q' = 2 f2 (1 - Phi/sigma_y) / (-d f2/d dl)
-                df2 = 2.0 * (a2 * pa * ia * ia * ia + b2 * pb * ib * ib * ib)  # = -d f2/d dl
-                dl += 2.0 * f2 * excess / df2
-                if excess <= _LAST_STEP:
-                    # quadratic convergence: the error after this step is O(excess^2), at
-                    # round-off, so skip the evaluation that would only confirm it
-                    break
-            ia = 1.0 / (1.0 + pa * dl)
-            ib = 1.0 / (1.0 + pb * dl)
+                dl += f2 * excess / (a2 * pa * ia * ia * ia + b2 * pb * ib * ib * ib)
+            u = 1.0 + pa * dl
+            v = 1.0 + pb * dl
+            iuv = 1.0 / (u * v)
+            ia = v * iuv
+            ib = u * iuv
             sp = (xx + yy) * ia
             sm = (xx - yy) * ib
             xx = 0.5 * (sp + sm)
