@@ -247,6 +247,9 @@ class Solver:
         if cfg.sort_interval and self.step_count % cfg.sort_interval == 0:
             self.sort_particles()
         dt = self.dt
+        remaining = cfg.end_time - self.t
+        if 0 < remaining < dt:  # land on the end time exactly
+            dt = remaining
         self.scheme.advance(self, dt)
         bad, outside, leaving = self._check_and_next_dt()
         if bad:
