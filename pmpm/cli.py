@@ -132,7 +132,7 @@ def run_case(argv):
             logger.info("done: %d steps in %.1f s wall -> %s", summary["steps"], summary["wall"], summary["output"])
     if rank == 0 and not args.no_plots:
         from .post import postprocess
-        postprocess(scenes[0], paths)
+        postprocess(scenes, paths)
     return 0
 
 

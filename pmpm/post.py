@@ -30,18 +30,18 @@ def write_history_csv(h5_path, outdir):
     return paths
 
 
-def postprocess(scene, h5_paths):
-    """CSV histories, history/energy plots of all variants, the deformed-shape plot."""
-    from .io import plot_deformed, plot_results
-    outdir = scene.output.directory
+def postprocess(scenes, h5_paths):
+    """CSV histories, history/energy plots of all variants (overlaid), each variant's
+    deformed-shape plot. ``scenes`` and ``h5_paths`` correspond one to one."""
+    from .io import plot_results
+    outdir = scenes[0].output.directory
     made = []
     for path in h5_paths:
         made += write_history_csv(path, outdir)
     made += plot_results(h5_paths, outdir)
-    spec = scene.output.deformed_plot
-    if spec:
-        for path in h5_paths:
-            made.append(_deformed(path, spec, outdir))
+    for scene, path in zip(scenes, h5_paths):
+        if scene.output.deformed_plot:
+            made.append(_deformed(path, scene.output.deformed_plot, outdir))
     for p in made:
         logger.info("wrote %s", p)
     return made

@@ -194,6 +194,11 @@ class FrameModel:
     nodes: list = field(default_factory=list)
     elements: list = field(default_factory=list)
     fixed: set = field(default_factory=set)
+    point_masses: dict = field(default_factory=dict)
+
+    def add_point_mass(self, node, mass):
+        """Add a translational point mass (ux and uy) at a node."""
+        self.point_masses[node] = self.point_masses.get(node, 0.0) + float(mass)
 
     def add_node(self, x, y):
         """Add a node at (x, y) and return its index."""
@@ -245,6 +250,9 @@ class FrameModel:
             dofs = np.r_[3 * el["i"] + np.arange(3), 3 * el["j"] + np.arange(3)]
             K[np.ix_(dofs, dofs)] += k
             M[np.ix_(dofs, dofs)] += m
+        for node, mass in self.point_masses.items():
+            M[3 * node, 3 * node] += mass
+            M[3 * node + 1, 3 * node + 1] += mass
         return K, M
 
     def reduced(self):
@@ -390,7 +398,7 @@ def _chain(model, start, end, n, x0, x1, A, I):
     return ids
 
 
-def portal_frame_model(elements_per_member=8, geometry="centreline", sections="handbook"):
+def portal_frame_model(elements_per_member=8, geometry="centreline", sections="handbook", stub_mass=False):
     """Build the portal frame as a :class:`FrameModel`.
 
     Parameters
@@ -401,6 +409,10 @@ def portal_frame_model(elements_per_member=8, geometry="centreline", sections="h
         Beam on centre lines, or beam spanning between column faces with rigid joint offsets.
     sections : {"handbook", "strip"}
         Tabulated section properties, or those of the idealised plates carried by the MPM strips.
+    stub_mass : bool
+        Add, at each top joint, the mass of the column stub above the beam centre line
+        (rho A_c d_b / 2, about 36 kg): the continuum model runs the column up to the beam's top
+        flange, and that mass sways with the joint.
 
     Returns
     -------
@@ -421,6 +433,10 @@ def portal_frame_model(elements_per_member=8, geometry="centreline", sections="h
     _chain(model, base_r, top_r, n, (SPAN, 0.0), (SPAN, HEIGHT), ac, ic)
     e = 0.5 * _SECTIONS["column"]["d"] if geometry == "clear" else 0.0
     _add_beam(model, top_l, top_r, n, e, ab, ib)
+    if stub_mass:
+        stub = RHO_STEEL * ac * 0.5 * _SECTIONS["beam"]["d"]
+        model.add_point_mass(top_l, stub)
+        model.add_point_mass(top_r, stub)
     return model, top_l
 
 
@@ -478,7 +494,8 @@ def portal_frame_closed_form_stiffness():
     return 24.0 * E_STEEL * ic / HEIGHT**3 * (12.0 * r + 1.0) / (12.0 * r + 4.0)
 
 
-def portal_frame_modes(elements_per_member=8, geometry="centreline", sections="handbook", count=3):
+def portal_frame_modes(elements_per_member=8, geometry="centreline", sections="handbook", count=3,
+                       stub_mass=False):
     """Natural periods of the frame, lowest first.
 
     Parameters
@@ -494,14 +511,14 @@ def portal_frame_modes(elements_per_member=8, geometry="centreline", sections="h
     numpy.ndarray
         The ``count`` longest periods in seconds (the first is the sway mode).
     """
-    model, _ = portal_frame_model(elements_per_member, geometry, sections)
+    model, _ = portal_frame_model(elements_per_member, geometry, sections, stub_mass)
     K, M, _ = model.reduced()
     w2, _ = generalized_eigen(K, M)
     return 2.0 * np.pi / np.sqrt(w2[:count])
 
 
 def portal_frame_response(load=LOAD, t_end=0.25, dt=2e-5, elements_per_member=8, geometry="centreline",
-                          sections="handbook"):
+                          sections="handbook", stub_mass=False):
     """Elastic, undamped response of the frame to a horizontal step load at the upper-left joint.
 
     Parameters
@@ -523,7 +540,7 @@ def portal_frame_response(load=LOAD, t_end=0.25, dt=2e-5, elements_per_member=8,
     ux : numpy.ndarray
         Horizontal displacement of the upper-left joint in m.
     """
-    model, node = portal_frame_model(elements_per_member, geometry, sections)
+    model, node = portal_frame_model(elements_per_member, geometry, sections, stub_mass)
     K, M, free = model.reduced()
     nsteps = int(round(t_end / dt))
     t, u = newmark_average_acceleration(K, M, _load_vector(free, node, load), dt, nsteps)
