@@ -12,7 +12,8 @@ uniaxial and pure-shear paths), with the flow direction and hardening at the end
 Formulations
 ------------
 plane_stress
-    The projected algorithm of Simo and Taylor (1986; Simo and Hughes 1998, section 3.4):
+    The projected algorithm of Simo and Taylor (IJNME 22, 1986; Simo and Hughes, Computational
+    Inelasticity, 1998, ch. 3):
     D and the plane-stress projection P share the eigenvectors (1, 1, 0), (1, -1, 0), (0, 0, 1),
     so the relative stress xi = sigma - eta at the end of the step is the trial one scaled
     component-wise in that basis:
@@ -24,7 +25,7 @@ plane_stress
     solved by Newton's method on q = 1/Phi(xi(d_lambda)) - 1/sigma_y: 1/Phi is a power mean of
     order -2 of functions linear in d_lambda, hence concave, so Newton from d_lambda = 0
     increases monotonically to the root (no overshoot, d_lambda never negative) and, q being
-    nearly linear, converges in 2-4 iterations.
+    nearly linear, converges in 2-4 iterations; the stress lands on the surface to round-off.
 plane_strain
     Classical radial return in 4 components (sxx, syy, sxy, szz): the deviatoric part of xi
     scales by sigma_y / Phi_tr and d_lambda = (Phi_tr - sigma_y) / (c + 3 mu) in closed form.
@@ -52,6 +53,7 @@ _MAXIT = 50
 
 @nb.njit(cache=True)
 def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which):
+    """The particle loop of :meth:`BilinearVonMises.update_stress` (arrays updated in place)."""
     E, nu, sy, alpha = params[0], params[1], params[2], params[3]
     c = alpha * E / (1.0 - alpha)
     k = c / sy

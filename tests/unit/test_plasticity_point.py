@@ -21,8 +21,8 @@ C_ZIEGLER = ALPHA * E / (1 - ALPHA)
 MU = E / (2 * (1 + NU))
 KEY = "materials.steel"
 
-# The uniaxial driver solves for deyy until |syy| is below this; the slopes and paths checked
-# below are compared at 1e-6 or coarser, so this solve error is invisible in them.
+# The uniaxial driver solves for deyy until |syy| is below this: 100x under the tightest
+# tolerance below (1e-8 sy on the bilinear paths), so the solve error is invisible in them.
 SOLVE_TOL = 1e-10 * SY
 
 
@@ -261,6 +261,7 @@ def test_smooth_approaches_bilinear_as_n_grows():
 
 
 def shear_path(mat, gamma_max, inc):
+    """Pure shear strain to ``gamma_max``: (point, tau per step, max |normal stress| per step)."""
     point = Point(mat)
     taus, normals = [], []
     for d in legs(0.0, [gamma_max], inc):
