@@ -8,7 +8,7 @@ export PYTHONFAULTHANDLER=1
 # numba compiles each kernel once into its cache; warm it from one process so that the MPI
 # ranks started below do not race writing the same cache entries (design.md section 8)
 python -m pmpm.warmup
-python -m pytest -q tests/unit tests/verification "$@"
+python -m pytest -q tests/unit tests/verification tests/integration "$@"
 for n in 2 3 4; do
     echo "== MPI tests on $n ranks =="
     mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q -p no:cacheprovider tests/mpi

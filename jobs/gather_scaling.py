@@ -117,7 +117,7 @@ def build_table(results):
         by_ranks[int(r["ranks"])] = r  # the last one wins
     table = []
     for mode, ref, by_ranks in series:
-        name = f"{mode} {ref:.3g}" + (" per rank" if mode == "weak" else "")
+        name = f"{mode}, {ref:,.0f} particles" + (" per rank" if mode == "weak" else "")
         k0 = min(by_ranks)
         base = by_ranks[k0]["particle_steps_per_s"] / k0
         for k in sorted(by_ranks):
@@ -161,12 +161,14 @@ def markdown(table):
              "|" + "|".join("---" if k in ("series", "mode") else "---:" for k, _, _ in COLUMNS) + "|"]
     for row in table:
         lines.append("| " + " | ".join(_fmt(f, row[k]) for k, _, f in COLUMNS) + " |")
-    notes = ["", "work efficiency = 1 / work inflation (CPU time of all ranks computing vs one rank "
-             "doing the same work); wall efficiency = (particle-steps/s per rank) relative to the "
-             "series' smallest rank count"]
-    refs = sorted({(r["series"], r["wall_reference_ranks"]) for r in table})
-    notes += [f"; `{s}`: {k} rank(s)" for s, k in refs if k != 1]
-    return "\n".join(lines) + "\n" + "".join(notes) + ".\n"
+    note = ("\nWork efficiency = 1 / work inflation (CPU time of all ranks computing over the CPU time of "
+            "one rank doing the same work). Wall efficiency = particle-steps/s per rank relative to")
+    refs = {r["series"]: r["wall_reference_ranks"] for r in table}
+    if all(k == 1 for k in refs.values()):
+        note += " 1 rank."
+    else:
+        note += " the series' smallest rank count (" + "; ".join(f"{s}: {k}" for s, k in refs.items()) + ")."
+    return "\n".join(lines) + "\n" + note + "\n"
 
 
 def plot(table, path):

@@ -97,6 +97,7 @@ class Run:
         s.t, s.step_count, s.dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
         s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
         s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
+        s.initial_energy = float(attrs["initial_energy"])
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
@@ -106,12 +107,13 @@ class Run:
         if not self.write:
             return
         from .io import write_checkpoint
+        self.flush_history()  # so a restart from this checkpoint misses no history row
         s = self.solver
         snap = snap or _Snapshot(s)
         ext, internal = self.comm.allreduce(np.array([snap.external_work, snap.internal_work]))
         write_checkpoint(_checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
                          {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
-                          "internal_work": float(internal),
+                          "internal_work": float(internal), "initial_energy": s.initial_energy,
                           "removed": s.removed, "n_total": s.n_total})
 
     # -- recording --------------------------------------------------------------------------
@@ -173,9 +175,13 @@ class Run:
         self._log_start()
         end = cfg.end_time
         eps = 1e-12 * end
-        next_history = s.t
-        next_frame = s.t if self.restarted_from is None else s.t + out.interval
-        next_ckpt = s.t + out.checkpoint_interval if out.checkpoint_interval else np.inf
+        # output schedules are multiples of their intervals from t = 0, so a restarted run
+        # continues them exactly where the interrupted run would have gone on
+        next_history = _next_multiple(s.t, out.history_interval, eps, self.restarted_from is None)
+        next_frame = _next_multiple(s.t, out.interval, eps, self.restarted_from is None)
+        next_ckpt = (_next_multiple(s.t, out.checkpoint_interval, eps, False)
+                     if out.checkpoint_interval else np.inf)
+        last_frame = self.restarted_from if self.restarted_from is not None else -np.inf
         snap = _Snapshot(s)
         wall0 = time.perf_counter()
         last_progress = wall0
@@ -183,15 +189,16 @@ class Run:
         while True:
             if s.t >= next_history - eps:
                 self.record_history()
-                next_history += out.history_interval
-            if s.t >= next_frame - eps or s.t >= end - eps:
+                next_history = _next_multiple(s.t, out.history_interval, eps, False)
+            if s.t >= next_frame - eps or (s.t >= end - eps and s.t > last_frame + eps):
                 self.write_frame()
-                next_frame += out.interval
+                last_frame = s.t
+                next_frame = _next_multiple(s.t, out.interval, eps, False)
             if s.t >= end - eps or (cfg.max_steps and s.step_count >= cfg.max_steps):
                 break
             if s.t >= next_ckpt - eps:
                 self.checkpoint()
-                next_ckpt += out.checkpoint_interval
+                next_ckpt = _next_multiple(s.t, out.checkpoint_interval, eps, False)
             if s.step_count % self.snapshot_every == 0:
                 snap = _Snapshot(s)
             try:
@@ -243,6 +250,14 @@ class Run:
             if self.rank == 0:
                 from .io import write_xdmf
                 write_xdmf(self.path)
+
+
+def _next_multiple(t, interval, eps, include_now):
+    """The first multiple of ``interval`` at or after ``t`` (``include_now``) or after it."""
+    k = np.floor((t + eps) / interval)
+    if include_now and abs(t - k * interval) <= eps:
+        return k * interval
+    return (k + 1) * interval
 
 
 def _checkpoint_base(path):

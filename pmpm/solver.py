@@ -31,6 +31,12 @@ from .errors import ConfigError
 __all__ = ["Solver"]
 logger = logging.getLogger(__name__)
 
+#: steps between energy checks (each is one pass over the particles and one allreduce)
+ENERGY_CHECK_INTERVAL = 10
+#: energy above (initial + external work) that counts as divergence, relative to the energies
+#: in play: healthy runs stay within a few percent (tests show < 5%), diverging ones explode
+ENERGY_GROWTH_LIMIT = 0.5
+
 
 class Solver:
     """Explicit MPM on the ranks of ``comm`` (``None``: COMM_WORLD).
@@ -74,6 +80,7 @@ class Solver:
         self.removed = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
+        self.initial_energy = self.energies()["total"]
 
     # -- set-up helpers ---------------------------------------------------------------------
     def _owned(self, x):
@@ -256,6 +263,8 @@ class Solver:
             raise UnstableRunError(f"non-finite particle velocity at t = {self.t + dt:.6g} s "
                                    f"(step {self.step_count + 1}, dt = {dt:.3g} s; the stable step is "
                                    f"about {self.critical_dt():.3g} s)")
+        if outside or (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0:
+            self.check_energy(dt)
         if outside:
             if cfg.on_particle_exit == "error":
                 raise ParticleExitError(f"{outside} particle(s) left the grid at t = {self.t + dt:.6g} s: "
@@ -268,6 +277,18 @@ class Solver:
             self.rebalance()
         self.dt = self.stable_dt(self.vmax)
         return dt
+
+    def check_energy(self, dt):
+        """Stop a run whose energy grows beyond what the loads put in (a diverging run grows
+        exponentially; a healthy one stays within a few percent)."""
+        e = self.energies()
+        supplied = self.initial_energy + e["external_work"]
+        scale = abs(self.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
+        if e["total"] - supplied > ENERGY_GROWTH_LIMIT * scale and scale > 0:
+            raise UnstableRunError(
+                f"the run diverged at t = {self.t + dt:.6g} s (step {self.step_count + 1}): energy "
+                f"{e['total']:.4g} J exceeds the initial energy plus external work {supplied:.4g} J; "
+                f"dt = {dt:.3g} s, the stable step is about {self.critical_dt():.3g} s")
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self):

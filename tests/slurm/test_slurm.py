@@ -129,6 +129,14 @@ def _environ_has(pid, needle):
         return False
 
 
+def _cmdline(pid):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read().replace(b"\0", b" ").decode(errors="replace").strip()[:120]
+    except OSError:
+        return "?"
+
+
 class Cluster:
     """munged, slurmctld and slurmd on 127.0.0.1, all files under ``root``."""
 
@@ -302,6 +310,9 @@ PartitionName=test Nodes={self.node} Default=YES MaxTime=30 State=UP
                 p.kill()
                 p.wait(10)
         left = self.leftovers()
+        if left:
+            print(f"\nslurm test cluster: ending {len(left)} leftover process(es): "
+                  + "; ".join(f"{pid} {_cmdline(pid)}" for pid in left))
         for sig in (signal.SIGTERM, signal.SIGKILL):
             for pid in left:
                 with contextlib.suppress(ProcessLookupError, PermissionError):

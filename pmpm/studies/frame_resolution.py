@@ -1,0 +1,266 @@
+"""Resolution study of the paper's steel portal frame (cases/portal_frame.toml).
+
+For each cell size, both variants (``elastic``, ``elastoplastic``) run in-process on one rank
+(``Solver(scene, MPI.COMM_SELF)``, as tests/verification/test_portal_frame.py does), with the grid's
+cells scaled so the domain stays x in [-0.5, 6.6], y in [0, 4.2]. Everything else (bodies, bases,
+load, CFL 0.5, cubic B-splines, MUSL, 2 x 2 particles per cell) comes from the case file; the strips
+are regenerated at each resolution with their area and second moment matched to the W shapes.
+
+The upper-left joint's displacement (the case's ``upper_left_joint`` track) is sampled every
+``output.history_interval`` (1e-4 s). Reported per run: first peak of ux (mm) and its time, the
+sway period (the test's estimator: twice the median spacing of the crossings of half the first
+peak), particle count, steps, wall and CPU time of the stepping loop; per cell size, the permanent
+drift: the centre of oscillation (time mean of ux over the last full period of each run, the
+period being that run's own estimate) of the elastoplastic run minus that of the elastic run.
+
+Run (one rank; a shared 2-vCPU machine leaves the other core to other work)::
+
+    python -m pmpm.studies.frame_resolution --cells 0.1 0.05 0.025 --t-end 0.25 0.25 0.1 \
+        --out docs/portal_frame_resolution.json
+
+``--t-end`` takes one value for all cell sizes or one per cell size (a fine grid can run a shorter
+end time that still covers the first peak and two periods, about 0.1 s). The script prints one
+progress line per tenth of each run on stderr, then a Markdown table and, last, one JSON line on
+stdout; the same JSON is written to ``--out`` (rewritten after every run, so a stopped study
+keeps what it finished). ``--histories FILE.npz`` also saves the sampled histories.
+"""
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+__all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main"]
+
+CASE = os.path.join(os.path.dirname(__file__), "..", "..", "cases", "portal_frame.toml")
+DOMAIN_LO = (-0.5, 0.0)
+DOMAIN_HI = (6.6, 4.2)
+VARIANTS = ("elastic", "elastoplastic")
+TRACK = "upper_left_joint"
+
+
+def frame_scene(variant, cell_size, t_end, case=CASE):
+    """The portal frame scene of ``variant`` with cells of ``cell_size`` over the case's domain and
+    ``solver.end_time = t_end``."""
+    from pmpm.config import apply_overrides, parse_scene, read_toml
+
+    data = read_toml(case)
+    data = apply_overrides(data, data["variants"][variant], f"variants.{variant}")
+    cells = [int(round((hi - lo) / cell_size)) for lo, hi in zip(DOMAIN_LO, DOMAIN_HI)]
+    for lo, hi, n in zip(DOMAIN_LO, DOMAIN_HI, cells):
+        if not math.isclose(lo + n * cell_size, hi, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(hi))):
+            raise ValueError(f"cell size {cell_size} does not divide the domain [{lo}, {hi}]")
+    data["grid"] = {"origin": list(DOMAIN_LO), "cell_size": float(cell_size), "cells": cells}
+    data["solver"]["end_time"] = float(t_end)
+    out = data.setdefault("output", {})
+    out.pop("checkpoint_interval", None)  # not written here; keeps short end times valid
+    scene = parse_scene(data, case)
+    return dataclasses.replace(scene, variant=variant)
+
+
+def run_frame(scene, progress=None):
+    """Run ``scene`` on this process alone and sample the upper-left joint.
+
+    Returns
+    -------
+    dict
+        t, ux, uy (arrays), particles, steps, dt0, wall and cpu time of the stepping loop (s),
+        setup time (s), and the final energies.
+    """
+    from mpi4py import MPI
+
+    from pmpm.solver import Solver
+    from pmpm.tracking import Tracker
+
+    t0 = time.perf_counter()
+    s = Solver(scene, MPI.COMM_SELF)
+    tracks = [tr for tr in scene.output.track if tr.name == TRACK]
+    tr = Tracker(tracks, s)
+    setup = time.perf_counter() - t0
+    interval = scene.output.history_interval
+    end = scene.solver.end_time
+    t, ux, uy = [0.0], [0.0], [0.0]
+    next_sample, next_energy, next_report = interval, 1e-3, 0.1 * end
+    gap = 0.0
+    w0, c0 = time.perf_counter(), time.process_time()
+    while s.t < end * (1 - 1e-12):
+        s.step()
+        if s.t >= next_sample - 1e-12:
+            row = tr.sample()[0]
+            t.append(s.t)
+            ux.append(row[0])
+            uy.append(row[1])
+            next_sample += interval * max(1, math.floor((s.t - next_sample) / interval + 1e-9) + 1)
+        if s.t >= next_energy - 1e-12:
+            e = s.energies()
+            gap = max(gap, abs(e["total"] - e["external_work"]))
+            next_energy += 1e-3
+        if progress and s.t >= next_report - 1e-12:
+            progress(s.t, end, s.step_count, time.perf_counter() - w0)
+            next_report += 0.1 * end
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    e = s.energies()
+    gap = max(gap, abs(e["total"] - e["external_work"]))
+    return {"t": np.array(t), "ux": np.array(ux), "uy": np.array(uy), "particles": int(s.n_total),
+            "steps": int(s.step_count), "dt0": float(scene.solver.cfl * s.grid.h / s.wave_speed),
+            "wall_s": wall, "cpu_s": cpu, "setup_s": setup, "energies": e,
+            "energy_gap_rel": gap / e["external_work"] if e["external_work"] else float("nan")}
+
+
+def peak_and_period(t, u):
+    """First maximum (within 0.03 s) and sway period, exactly as tests/verification/
+    test_portal_frame.py estimates them: the period is twice the median spacing of the crossings
+    of half the first peak (the static level of an undamped step response), interpolated
+    linearly. Returns (peak, time of peak, period)."""
+    i = int(np.argmax(u[t < 0.03]))
+    d = u - 0.5 * u[i]
+    k = np.nonzero(np.sign(d[:-1]) != np.sign(d[1:]))[0]
+    tc = t[k] - d[k] * (t[k + 1] - t[k]) / (d[k + 1] - d[k])
+    return float(u[i]), float(t[i]), 2 * float(np.median(np.diff(tc)))
+
+
+def oscillation_centre(t, u, period):
+    """Time mean of ``u`` over the last full ``period`` of the record (trapezoidal rule)."""
+    start = t[-1] - period
+    tt = np.concatenate([[start], t[t > start]])
+    uu = np.interp(tt, t, u)
+    return float(np.trapezoid(uu, tt) / (tt[-1] - tt[0]))
+
+
+def beam_reference(t_end):
+    """The Euler-Bernoulli frame model of tests/verification (centre lines, stub mass), through the
+    same estimator; None when the tests are not next to this package."""
+    here = os.path.join(os.path.dirname(__file__), "..", "..", "tests", "verification")
+    if not os.path.exists(os.path.join(here, "frame_beam_model.py")):
+        return None
+    sys.path.insert(0, os.path.abspath(here))
+    try:
+        import frame_beam_model as beam
+    finally:
+        sys.path.pop(0)
+    tb, ub = beam.portal_frame_response(t_end=t_end, stub_mass=True)
+    peak, tp, period = peak_and_period(tb, ub)
+    return {"model": "Euler-Bernoulli, centre lines, column-stub mass (frame_beam_model.py)",
+            "peak_mm": round(peak * 1e3, 3), "t_peak_s": round(tp, 5), "period_ms": round(period * 1e3, 2),
+            "modal_period_ms": round(float(beam.portal_frame_modes(stub_mass=True)[0]) * 1e3, 2)}
+
+
+def _summary(cell, variant, t_end, run):
+    peak, tp, period = peak_and_period(run["t"], run["ux"])
+    return {"cell_size": cell, "variant": variant, "t_end": t_end, "particles": run["particles"],
+            "steps": run["steps"], "dt0_s": run["dt0"], "peak_mm": peak * 1e3, "t_peak_s": tp,
+            "period_ms": period * 1e3,
+            "centre_mm": oscillation_centre(run["t"], run["ux"], period) * 1e3,
+            "wall_s": run["wall_s"], "cpu_s": run["cpu_s"], "setup_s": run["setup_s"],
+            "energy_gap_rel": run["energy_gap_rel"],
+            "plastic_work_J": run["energies"]["plastic_work"],
+            "external_work_J": run["energies"]["external_work"]}
+
+
+def _rounded(d):
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, float):
+            out[k] = float(f"{v:.6g}")
+        else:
+            out[k] = v
+    return out
+
+
+def markdown_table(rows, full_t_end):
+    """The study's rows as a Markdown table (drift on the elastoplastic rows)."""
+    head = ("| cell (m) | variant | particles | steps | end time (s) | first peak (mm) | at (s) "
+            "| sway period (ms) | drift (mm) | wall (s) | CPU (s) |")
+    lines = [head, "|" + "|".join(["---"] * 11) + "|"]
+    for r in rows:
+        drift = f"{r['drift_mm']:.2f}" if r.get("drift_mm") is not None else ""
+        end = f"{r['t_end']:g}" + ("" if r["t_end"] >= full_t_end else " (shortened)")
+        lines.append(f"| {r['cell_size']:g} | {r['variant']} | {r['particles']} | {r['steps']} | {end} "
+                     f"| {r['peak_mm']:.2f} | {r['t_peak_s']:.4f} | {r['period_ms']:.1f} | {drift} "
+                     f"| {r['wall_s']:.0f} | {r['cpu_s']:.0f} |")
+    return "\n".join(lines)
+
+
+def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stderr):
+    """Run every cell size and variant; returns the result dict (also written to ``out``)."""
+    from mpi4py import MPI
+
+    result = {"case": "cases/portal_frame.toml", "track": TRACK, "ranks": 1,
+              "host": {"cpus": os.cpu_count(), "note": "2 vCPUs shared with other work: wall times are noisy"},
+              "command": "python -m pmpm.studies.frame_resolution " + " ".join(sys.argv[1:]),
+              "mpi": MPI.Get_library_version().splitlines()[0].strip(), "runs": []}
+    if reference:
+        result["beam_model"] = beam_reference(max(t_ends))
+    saved = {}
+    for cell, t_end in zip(cells, t_ends):
+        pair = {}
+        for variant in VARIANTS:
+            scene = frame_scene(variant, cell, t_end)
+            print(f"[frame_resolution] h = {cell:g} m, {variant}, end {t_end:g} s: starting", file=log, flush=True)
+
+            def progress(t, end, steps, wall, _v=variant, _c=cell):
+                eta = wall * (end - t) / t if t > 0 else float("nan")
+                print(f"[frame_resolution] h = {_c:g} m, {_v}: t = {t:.4f}/{end:g} s, {steps} steps, "
+                      f"{wall:.0f} s elapsed, about {eta:.0f} s to go", file=log, flush=True)
+
+            run = run_frame(scene, progress)
+            row = _summary(cell, variant, t_end, run)
+            pair[variant] = row
+            saved[f"h{cell:g}_{variant}_t"] = run["t"]
+            saved[f"h{cell:g}_{variant}_ux"] = run["ux"]
+            saved[f"h{cell:g}_{variant}_uy"] = run["uy"]
+            row["drift_mm"] = None
+            if variant == "elastoplastic" and "elastic" in pair:
+                row["drift_mm"] = row["centre_mm"] - pair["elastic"]["centre_mm"]
+            result["runs"].append(_rounded(row))
+            print(f"[frame_resolution] h = {cell:g} m, {variant}: peak {row['peak_mm']:.2f} mm at "
+                  f"{row['t_peak_s']:.4f} s, period {row['period_ms']:.1f} ms, {row['steps']} steps, "
+                  f"{row['wall_s']:.0f} s", file=log, flush=True)
+            if out:
+                _write(out, result)
+            if histories:
+                np.savez_compressed(histories, **saved)
+    return result
+
+
+def _write(path, result):
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    tmp = path + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump(result, fh, indent=1)
+        fh.write("\n")
+    os.replace(tmp, path)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m pmpm.studies.frame_resolution", description=__doc__.splitlines()[0])
+    ap.add_argument("--cells", type=float, nargs="+", default=[0.1, 0.05, 0.025], help="cell sizes in m")
+    ap.add_argument("--t-end", type=float, nargs="+", default=[0.25],
+                    help="end time in s: one for all cell sizes, or one per cell size")
+    ap.add_argument("--out", default="docs/portal_frame_resolution.json", help="JSON file to write")
+    ap.add_argument("--histories", default=None, help="also save the sampled histories (.npz)")
+    ap.add_argument("--no-reference", action="store_true", help="skip the beam-model reference")
+    args = ap.parse_args(argv)
+    from mpi4py import MPI
+    if MPI.COMM_WORLD.size > 1:
+        ap.error("runs on one rank (every rank would repeat the whole study); start it without mpirun -n > 1")
+    t_ends = args.t_end * len(args.cells) if len(args.t_end) == 1 else args.t_end
+    if len(t_ends) != len(args.cells):
+        ap.error("--t-end takes one value or one per cell size")
+    full = max(t_ends)
+    result = study(args.cells, t_ends, args.out, args.histories, not args.no_reference)
+    print(markdown_table(result["runs"], full))
+    ref = result.get("beam_model")
+    if ref:
+        print(f"\nbeam model (centre lines, stub mass): peak {ref['peak_mm']:.2f} mm at {ref['t_peak_s']:.4f} s, "
+              f"period {ref['period_ms']:.1f} ms")
+    print(json.dumps(result, separators=(",", ":")))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
