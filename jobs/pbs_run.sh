@@ -116,6 +116,7 @@ if ! printf '%s\n' "${plan[@]}" | grep -qE $'\t(restart|done)\t'; then
     rc=$?
 else
     outs=()
+    ran=0
     for line in "${plan[@]}"; do
         IFS=$'\t' read -r variant state out t <<< "$line"
         outs+=("$out")
@@ -124,13 +125,13 @@ else
         case "$state" in
             done)    echo "pmpm run: $out is complete (checkpoint at t = $t): skipped" ;;
             restart) echo "pmpm run: $out: restarting from its newest checkpoint (t = $t)"
-                     run_pmpm "$CASE" "${vopt[@]}" --restart "$out"; rc=$? ;;
-            fresh)   run_pmpm "$CASE" "${vopt[@]}"; rc=$? ;;
+                     run_pmpm "$CASE" "${vopt[@]}" --restart "$out"; rc=$?; ran=1 ;;
+            fresh)   run_pmpm "$CASE" "${vopt[@]}"; rc=$?; ran=1 ;;
         esac
         [ "$rc" -ne 0 ] && break
     done
     # Runs made one variant at a time plot one variant each: redraw the comparison of all of them.
-    if [ "$rc" -eq 0 ] && [ "${#outs[@]}" -gt 1 ]; then
+    if [ "$rc" -eq 0 ] && [ "$ran" = 1 ] && [ "${#outs[@]}" -gt 1 ]; then
         mpirun -n 1 pmpm plot "${outs[@]}" -o "$(dirname "${outs[0]}")" < /dev/null \
             || echo "warning: could not redraw the comparison plots (pmpm plot)" >&2
     fi

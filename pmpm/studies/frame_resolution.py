@@ -165,7 +165,7 @@ def _rounded(d):
     out = {}
     for k, v in d.items():
         if isinstance(v, float):
-            out[k] = float(f"{v:.6g}")
+            out[k] = float(f"{v:.6g}") if math.isfinite(v) else None  # strict JSON has no NaN
         else:
             out[k] = v
     return out
@@ -178,9 +178,10 @@ def markdown_table(rows, full_t_end):
     lines = [head, "|" + "|".join(["---"] * 11) + "|"]
     for r in rows:
         drift = f"{r['drift_mm']:.2f}" if r.get("drift_mm") is not None else ""
+        period = f"{r['period_ms']:.1f}" if r.get("period_ms") is not None else "n/a"
         end = f"{r['t_end']:g}" + ("" if r["t_end"] >= full_t_end else " (shortened)")
         lines.append(f"| {r['cell_size']:g} | {r['variant']} | {r['particles']} | {r['steps']} | {end} "
-                     f"| {r['peak_mm']:.2f} | {r['t_peak_s']:.4f} | {r['period_ms']:.1f} | {drift} "
+                     f"| {r['peak_mm']:.2f} | {r['t_peak_s']:.4f} | {period} | {drift} "
                      f"| {r['wall_s']:.0f} | {r['cpu_s']:.0f} |")
     return "\n".join(lines)
 
@@ -192,9 +193,10 @@ def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stder
     result = {"case": "cases/portal_frame.toml", "track": TRACK, "ranks": 1,
               "host": {"cpus": os.cpu_count(), "note": "2 vCPUs shared with other work: wall times are noisy"},
               "command": "python -m pmpm.studies.frame_resolution " + " ".join(sys.argv[1:]),
-              "mpi": MPI.Get_library_version().splitlines()[0].strip(), "runs": []}
+              "mpi": MPI.Get_library_version().replace("\x00", "").splitlines()[0].strip(), "runs": []}
     if reference:
-        result["beam_model"] = beam_reference(max(t_ends))
+        ref = beam_reference(max(t_ends))
+        result["beam_model"] = _rounded(ref) if ref else None
     saved = {}
     for cell, t_end in zip(cells, t_ends):
         pair = {}
@@ -256,8 +258,9 @@ def main(argv=None):
     print(markdown_table(result["runs"], full))
     ref = result.get("beam_model")
     if ref:
+        period = "n/a" if ref["period_ms"] is None else f"{ref['period_ms']:.1f} ms"
         print(f"\nbeam model (centre lines, stub mass): peak {ref['peak_mm']:.2f} mm at {ref['t_peak_s']:.4f} s, "
-              f"period {ref['period_ms']:.1f} ms")
+              f"period {period} (first mode {ref['modal_period_ms']:.1f} ms)")
     print(json.dumps(result, separators=(",", ":")))
     return 0
 

@@ -77,8 +77,11 @@ def test_sigkill_then_restart_on_another_rank_count_gives_the_same_result(tmp_pa
     with h5py.File(full / "bar_results" / "bar.h5") as a, h5py.File(tmp_path / "bar_results" / "bar.h5") as b:
         np.testing.assert_allclose(b["frames/time"][:], a["frames/time"][:], rtol=1e-12)
         for field in ("x", "v", "stress"):
+            # relative to the field's magnitude over the run (the last frame may sit near a
+            # zero crossing of the vibration)
+            scale = np.abs(a[f"frames/{field}"][:]).max()
             xa, xb = a[f"frames/{field}"][-1], b[f"frames/{field}"][-1]
-            assert np.abs(xa - xb).max() <= 1e-12 * np.abs(xa).max(), field
+            assert np.abs(xa - xb).max() <= 1e-12 * scale, field
         np.testing.assert_allclose(b["history/middle"][:], a["history/middle"][:], rtol=0, atol=1e-12 * 2.0)
         assert len(a["energies/time"]) == len(b["energies/time"])
 
