@@ -78,6 +78,7 @@ class Solver:
         self.external_work = 0.0   # this rank's share; summed when reported
         self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
         self.removed = 0
+        self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
         self.initial_energy = self.energies()["total"]
@@ -245,6 +246,7 @@ class Solver:
         dest = self.decomp.owner_of_columns(cols)
         self.particles.fields = alltoallv_fields(self.comm, self.particles.fields, dest)
         self._build_window()
+        self.rebalances += 1
         return True
 
     # -- one step ---------------------------------------------------------------------------

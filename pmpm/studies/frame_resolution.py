@@ -9,9 +9,11 @@ are regenerated at each resolution with their area and second moment matched to 
 The upper-left joint's displacement (the case's ``upper_left_joint`` track) is sampled every
 ``output.history_interval`` (1e-4 s). Reported per run: first peak of ux (mm) and its time, the
 sway period (the test's estimator: twice the median spacing of the crossings of half the first
-peak), particle count, steps, wall and CPU time of the stepping loop; per cell size, the permanent
-drift: the centre of oscillation (time mean of ux over the last full period of each run, the
-period being that run's own estimate) of the elastoplastic run minus that of the elastic run.
+peak; a run that yields so much that it never swings back below half its first peak gets the
+same rule about its mean level after the peak instead, shown in brackets), particle count,
+steps, wall and CPU time of the stepping loop; per cell size, the permanent drift: the centre of
+oscillation (time mean of ux over the last full period of each run, the period being that run's
+own estimate) of the elastoplastic run minus that of the elastic run.
 
 Run (one rank; a shared 2-vCPU machine leaves the other core to other work)::
 
@@ -117,10 +119,25 @@ def peak_and_period(t, u):
     of half the first peak (the static level of an undamped step response), interpolated
     linearly. Returns (peak, time of peak, period)."""
     i = int(np.argmax(u[t < 0.03]))
-    d = u - 0.5 * u[i]
+    return float(u[i]), float(t[i]), _crossing_period(t, u, 0.5 * u[i])
+
+
+def _crossing_period(t, u, level):
+    """Twice the median spacing of the linearly interpolated crossings of ``level`` (NaN when
+    the record crosses it fewer than twice)."""
+    d = u - level
     k = np.nonzero(np.sign(d[:-1]) != np.sign(d[1:]))[0]
+    if len(k) < 2:
+        return float("nan")
     tc = t[k] - d[k] * (t[k + 1] - t[k]) / (d[k + 1] - d[k])
-    return float(u[i]), float(t[i]), 2 * float(np.median(np.diff(tc)))
+    return 2 * float(np.median(np.diff(tc)))
+
+
+def mean_level_period(t, u, t_peak):
+    """Fallback period for runs that yield so much that they never swing back below half the first
+    peak: the same median-crossing rule about the mean of the record after the first peak."""
+    after = t >= t_peak
+    return _crossing_period(t[after], u[after], float(np.mean(u[after])))
 
 
 def oscillation_centre(t, u, period):
@@ -151,10 +168,13 @@ def beam_reference(t_end):
 
 def _summary(cell, variant, t_end, run):
     peak, tp, period = peak_and_period(run["t"], run["ux"])
+    fallback = mean_level_period(run["t"], run["ux"], tp)
+    window = period if math.isfinite(period) else fallback
     return {"cell_size": cell, "variant": variant, "t_end": t_end, "particles": run["particles"],
             "steps": run["steps"], "dt0_s": run["dt0"], "peak_mm": peak * 1e3, "t_peak_s": tp,
-            "period_ms": period * 1e3,
-            "centre_mm": oscillation_centre(run["t"], run["ux"], period) * 1e3,
+            "period_ms": period * 1e3, "period_mean_level_ms": fallback * 1e3,
+            "centre_mm": oscillation_centre(run["t"], run["ux"], window) * 1e3,
+            "centre_window_ms": window * 1e3,
             "wall_s": run["wall_s"], "cpu_s": run["cpu_s"], "setup_s": run["setup_s"],
             "energy_gap_rel": run["energy_gap_rel"],
             "plastic_work_J": run["energies"]["plastic_work"],
@@ -178,11 +198,16 @@ def markdown_table(rows, full_t_end):
     lines = [head, "|" + "|".join(["---"] * 11) + "|"]
     for r in rows:
         drift = f"{r['drift_mm']:.2f}" if r.get("drift_mm") is not None else ""
-        period = f"{r['period_ms']:.1f}" if r.get("period_ms") is not None else "n/a"
+        period = (f"{r['period_ms']:.1f}" if r.get("period_ms") is not None else
+                  f"({r['period_mean_level_ms']:.1f})" if r.get("period_mean_level_ms") is not None else "n/a")
         end = f"{r['t_end']:g}" + ("" if r["t_end"] >= full_t_end else " (shortened)")
         lines.append(f"| {r['cell_size']:g} | {r['variant']} | {r['particles']} | {r['steps']} | {end} "
                      f"| {r['peak_mm']:.2f} | {r['t_peak_s']:.4f} | {period} | {drift} "
                      f"| {r['wall_s']:.0f} | {r['cpu_s']:.0f} |")
+    if any(r.get("period_ms") is None for r in rows):
+        lines.append("")
+        lines.append("(period in brackets: the run never swings back below half its first peak, so the "
+                     "test's estimator has no crossings; the same rule about the mean level after the peak)")
     return "\n".join(lines)
 
 
@@ -220,7 +245,8 @@ def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stder
                 row["drift_mm"] = row["centre_mm"] - pair["elastic"]["centre_mm"]
             result["runs"].append(_rounded(row))
             print(f"[frame_resolution] h = {cell:g} m, {variant}: peak {row['peak_mm']:.2f} mm at "
-                  f"{row['t_peak_s']:.4f} s, period {row['period_ms']:.1f} ms, {row['steps']} steps, "
+                  f"{row['t_peak_s']:.4f} s, period {row['period_ms']:.1f} ms "
+                  f"(mean-level rule {row['period_mean_level_ms']:.1f} ms), {row['steps']} steps, "
                   f"{row['wall_s']:.0f} s", file=log, flush=True)
             if out:
                 _write(out, result)

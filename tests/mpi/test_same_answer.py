@@ -109,5 +109,35 @@ def test_empty_ranks_and_migration_across_every_boundary():
     assert visited >= comm.size - 1
 
 
+@needs_ranks
+def test_rebalancing_keeps_the_balance_and_the_answer():
+    """A block a quarter of the domain wide travels across the whole grid; with rebalancing the
+    particle count per rank stays near the mean, and the answer is the serial one."""
+    size = comm.size
+    scene = parse_scene({
+        "particles_per_cell": 2,
+        "grid": {"cell_size": 0.1, "cells": [12 * size + 4, 6]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e4, "nu": 0.3, "density": 10.0}},
+        "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.1, 0.1],
+                    "upper": [0.1 + 0.3 * size, 0.5],
+                    "velocity": ["4.0 + 0.5 * sin(3 * x)", "0.3 * cos(3 * x)"]}],
+        # across the whole grid: until its front is two cells from the far edge (speed <= 4.5)
+        "solver": {"end_time": (0.1 * (12 * size + 4) - 0.2 - (0.1 + 0.3 * size)) / 4.5, "cfl": 0.5},
+        "parallel": {"rebalance_threshold": 1.3, "rebalance_interval": 5},
+        "output": {"track": [{"name": "corner", "point": [0.1, 0.1]}]},
+    }, "moving.toml")
+    ok, _ = _compare(scene)
+    assert ok
+    s = Solver(scene, comm)
+    worst = 1.0
+    while s.t < scene.solver.end_time - 1e-12:
+        s.step()
+        if s.step_count % 5 == 0:  # right after each rebalancing check
+            worst = max(worst, s.decomp.imbalance(s.particles.n))
+    assert s.rebalances >= 2
+    # the best split of whole columns is within one column's share of perfect
+    assert worst <= 1.3 + size / (0.3 * size / 0.1), worst
+
+
 if __name__ == "__main__":
     pytest.main([__file__, "-q"])
