@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries"]
+__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes"]
 logger = logging.getLogger(__name__)
 
 _COMPONENTS = {"fixed": (0, 1), "roller_x": (1,), "roller_y": (0,), "velocity": (0, 1)}
@@ -32,6 +32,12 @@ def check_boundaries(boundaries, grid):
     for k, bc in enumerate(boundaries):
         if not _select(X, Y, bc, 1e-6 * grid.h).any():
             raise ConfigError(f"boundary[{k}]", "box selects no grid node")
+
+
+def select_nodes(window, bc):
+    """Boolean (window.shape) mask of the window's nodes inside the boundary's box."""
+    X, Y = window.node_coords()
+    return _select(X, Y, bc, 1e-6 * window.grid.h)
 
 
 def apply_boundary_masks(window, boundaries):

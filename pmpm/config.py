@@ -68,6 +68,8 @@ class ForceConfig:
 class LoadsConfig:
     gravity: Optional[tuple]
     forces: tuple
+    ground_motion: Optional[dict] = None   # base acceleration record on the fixed nodes
+    damping: float = 0.0                   # mass-proportional damping coefficient (1/s)
 
 
 @dataclass(frozen=True)
@@ -112,6 +114,12 @@ class ParallelConfig:
 
 
 @dataclass(frozen=True)
+class ContactConfig:
+    friction: float
+    bodies: tuple             # names of the bodies with their own velocity field
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene; ``materials`` keeps each material's TOML table (validated)."""
     path: str
@@ -126,6 +134,7 @@ class Scene:
     solver: SolverConfig
     output: OutputConfig
     parallel: ParallelConfig
+    contact: Optional[ContactConfig] = None
     variants: dict = field(default_factory=dict)
     variant: str = ""
 
@@ -227,11 +236,28 @@ def _boundaries(root):
     return tuple(out)
 
 
+def _ground_motion(t):
+    """``[loads.ground_motion]``: an acceleration record applied to the fixed base nodes."""
+    if t is None:
+        return None
+    gm = {"file": t.string("file"),
+          "format": t.string("format", "auto", choices=("auto", "two_column", "at2")),
+          "direction": t.string("direction", "x", choices=("x", "y")),
+          "scale": t.number("scale", 1.0),
+          "boundaries": t.raw("boundaries", [])}
+    if not isinstance(gm["boundaries"], list) or not all(isinstance(b, str) for b in gm["boundaries"]):
+        raise ConfigError(t.path("boundaries"), "must be a list of [[boundary]] names")
+    t.finish()
+    return gm
+
+
 def _loads(root):
     t = root.table("loads", None)
     if t is None:
         return LoadsConfig(gravity=None, forces=())
     gravity = t.vector("gravity", None)
+    ground_motion = _ground_motion(t.table("ground_motion", None))
+    damping = t.number("damping", 0.0, low=0.0)
     forces = []
     for k, f in enumerate(t.tables("forces")):
         forces.append(ForceConfig(
@@ -240,7 +266,7 @@ def _loads(root):
             time_function=parse_time_function(f.table("time_function", {"type": "step"}))))
         f.finish()
     t.finish()
-    return LoadsConfig(gravity=gravity, forces=tuple(forces))
+    return LoadsConfig(gravity=gravity, forces=tuple(forces), ground_motion=ground_motion, damping=damping)
 
 
 def _solver(t):
@@ -308,6 +334,23 @@ def _parallel(t):
     return p
 
 
+def _contact(t, bodies):
+    if t is None:
+        return None
+    names = [b.name for b in bodies]
+    listed = t.raw("bodies", names)
+    if not isinstance(listed, list) or not listed or not all(isinstance(n, str) for n in listed):
+        raise ConfigError(t.path("bodies"), "must be a non-empty list of body names")
+    for n in listed:
+        if n not in names:
+            raise ConfigError(t.path("bodies"), f"no body named {n!r} (defined: {', '.join(names)})")
+    if len(set(listed)) != len(listed):
+        raise ConfigError(t.path("bodies"), "names a body twice")
+    c = ContactConfig(friction=t.number("friction", low=0.0), bodies=tuple(listed))
+    t.finish()
+    return c
+
+
 def _materials(root, formulation):
     from .materials import make_material
     t = root.table("materials")
@@ -342,6 +385,7 @@ def parse_scene(data, path="<scene>"):
                   loads=_loads(root), solver=solver,
                   output=_output(root.table("output", None), stem, solver.end_time, state_fields),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
+    scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
     root.finish()
     return scene
 

@@ -20,7 +20,8 @@ from .tracking import HISTORY_COLUMNS, Tracker
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
 
-ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "internal_work", "external_work", "total")
+ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "internal_work", "damping_work",
+                  "external_work", "total")
 
 
 def output_path(scene):
@@ -37,6 +38,7 @@ class _Snapshot:
         self.t, self.step, self.dt = solver.t, solver.step_count, solver.dt
         self.external_work = solver.external_work
         self.internal_work = solver.internal_work
+        self.damping_work = solver.damping_work
 
 
 class Run:
@@ -54,7 +56,8 @@ class Run:
 
     def __init__(self, scene, comm=None, write=True, restart=None, snapshot_every=50):
         self.scene = scene
-        self.solver = Solver(scene, comm)
+        from .contact import ContactSolver  # scene [contact]: one velocity field per body
+        self.solver = (Solver if scene.contact is None else ContactSolver)(scene, comm)
         self.comm = self.solver.comm
         self.rank = self.comm.Get_rank()
         self.write = write
@@ -98,6 +101,7 @@ class Run:
         s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
         s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
         s.initial_energy = float(attrs["initial_energy"])
+        s.damping_work = float(attrs.get("damping_work", 0.0)) if self.rank == 0 else 0.0
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
@@ -110,10 +114,12 @@ class Run:
         self.flush_history()  # so a restart from this checkpoint misses no history row
         s = self.solver
         snap = snap or _Snapshot(s)
-        ext, internal = self.comm.allreduce(np.array([snap.external_work, snap.internal_work]))
+        ext, internal, damped = self.comm.allreduce(
+            np.array([snap.external_work, snap.internal_work, snap.damping_work]))
         write_checkpoint(_checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
                          {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
-                          "internal_work": float(internal), "initial_energy": s.initial_energy,
+                          "internal_work": float(internal), "damping_work": float(damped),
+                          "initial_energy": s.initial_energy,
                           "removed": s.removed, "n_total": s.n_total})
 
     # -- recording --------------------------------------------------------------------------
@@ -167,6 +173,10 @@ class Run:
         out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
         if self.scene.solver.large_rotations:
             out.append("large rotations (Jaumann stress rate)")
+        if s.damping is not None:
+            out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
+        if s.ground is not None:
+            out.append(s.ground.describe())
         return out
 
     def execute(self):

@@ -38,23 +38,17 @@ def linear(s, n):
 
 
 @nb.njit(cache=True, inline="always")
-def _quad(xi):
-    a = abs(xi)
-    if a < 0.5:
-        return 0.75 - xi * xi, -2.0 * xi
-    if a < 1.5:
-        t = 1.5 - a
-        return 0.5 * t * t, -t if xi > 0 else t
-    return 0.0, 0.0
-
-
-@nb.njit(cache=True, inline="always")
 def quadratic(s, n):
-    """Quadratic B-splines centred on nodes: 3 nodes per axis, boundary-modified at the edges."""
+    """Quadratic B-splines centred on nodes: 3 nodes per axis, boundary-modified at the edges.
+
+    With c the nearest node and f = s - c in [-1/2, 1/2), the weights of nodes c-1, c, c+1 are
+    (1/2 - f)^2 / 2, 3/4 - f^2, (1/2 + f)^2 / 2 (branch-free closed forms of the B-spline)."""
     c = int(math.floor(s + 0.5))
-    w0, g0 = _quad(s - (c - 1))
-    w1, g1 = _quad(s - c)
-    w2, g2 = _quad(s - (c + 1))
+    f = s - c
+    a = 0.5 - f
+    b = 0.5 + f
+    w0, w1, w2 = 0.5 * a * a, 0.75 - f * f, 0.5 * b * b
+    g0, g1, g2 = -a, -2.0 * f, b
     if c - 1 < 0:  # ghost node -1 -> 2x onto node 0, -1x onto node 1
         return 0, (w1 + 2 * w0, w2 - w0, 0.0), (g1 + 2 * g0, g2 - g0, 0.0)
     if c + 1 > n:  # ghost node n+1 -> 2x onto node n, -1x onto node n-1
@@ -63,28 +57,24 @@ def quadratic(s, n):
 
 
 @nb.njit(cache=True, inline="always")
-def _cubic(xi):
-    a = abs(xi)
-    if a < 1.0:
-        w = 0.5 * a * a * a - a * a + 2.0 / 3.0
-        g = 1.5 * a * a - 2.0 * a
-    elif a < 2.0:
-        t = 2.0 - a
-        w = t * t * t / 6.0
-        g = -0.5 * t * t
-    else:
-        return 0.0, 0.0
-    return w, g if xi >= 0 else -g
-
-
-@nb.njit(cache=True, inline="always")
 def cubic(s, n):
-    """Cubic B-splines (the paper's choice): 4 nodes per axis, boundary-modified at the edges."""
+    """Cubic B-splines (the paper's choice): 4 nodes per axis, boundary-modified at the edges.
+
+    With c = floor(s) and f = s - c in [0, 1), the weights of nodes c-1 .. c+2 are
+    (1-f)^3/6, (3f^3 - 6f^2 + 4)/6, (-3f^3 + 3f^2 + 3f + 1)/6, f^3/6 (branch-free)."""
     c = int(math.floor(s))
-    w0, g0 = _cubic(s - (c - 1))
-    w1, g1 = _cubic(s - c)
-    w2, g2 = _cubic(s - (c + 1))
-    w3, g3 = _cubic(s - (c + 2))
+    f = s - c
+    e = 1.0 - f
+    f2 = f * f
+    f3 = f2 * f
+    w0 = e * e * e / 6.0
+    w1 = 0.5 * f3 - f2 + 2.0 / 3.0
+    w2 = (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) / 6.0
+    w3 = f3 / 6.0
+    g0 = -0.5 * e * e
+    g1 = 1.5 * f2 - 2.0 * f
+    g2 = -1.5 * f2 + f + 0.5
+    g3 = 0.5 * f2
     if c - 1 < 0:
         return 0, (w1 + 2 * w0, w2 - w0, w3, 0.0), (g1 + 2 * g0, g2 - g0, g3, 0.0)
     if c + 2 > n:

@@ -21,6 +21,7 @@ from . import kernels as K
 from .boundary import apply_boundary_masks, check_boundaries
 from .errors import ParticleExitError, UnstableRunError
 from .grid import Grid, GridWindow
+from .groundmotion import GroundMotion
 from .loads import Loads
 from .materials import make_material
 from .schemes import make_scheme
@@ -36,6 +37,11 @@ ENERGY_CHECK_INTERVAL = 10
 #: energy above (initial + external work) that counts as divergence, relative to the energies
 #: in play: healthy runs stay within a few percent (tests show < 5%), diverging ones explode
 ENERGY_GROWTH_LIMIT = 0.5
+
+
+def _scene_dir(scene):
+    import os
+    return os.path.dirname(scene.path) if os.path.isabs(scene.path) else "."
 
 
 class Solver:
@@ -62,6 +68,9 @@ class Solver:
         self.scheme = make_scheme(cfg.scheme)
         self.loads = Loads(scene.loads)
         check_boundaries(scene.boundaries, self.grid)
+        self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
+                       if scene.loads.ground_motion else None)
+        self.damping = scene.loads.damping or None  # None compiles the damping out
         everything = create_particles(scene, self.grid, self.materials, self.labels)
         self.n_total = everything.n
         self.axis = choose_axis(scene.parallel.axis, self.grid)
@@ -77,6 +86,7 @@ class Solver:
         self.step_count = 0
         self.external_work = 0.0   # this rank's share; summed when reported
         self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
+        self.damping_work = 0.0    # energy taken out by mass-proportional damping (owned nodes)
         self.removed = 0
         self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
@@ -91,6 +101,10 @@ class Solver:
     def _build_window(self):
         self.window = GridWindow(self.grid, self.axis, self.decomp.window)
         apply_boundary_masks(self.window, self.scene.boundaries)
+        w0 = self.decomp.window[0]
+        self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
+        if self.ground is not None:
+            self.ground.bind(self.window)
 
     def _local_speed(self):
         v = self.particles["v"]
@@ -137,14 +151,20 @@ class Solver:
         self.decomp.fill(view)
 
     def update_grid(self, dt):
-        """Steps 7-8 / eq. 3-4: (mv) += f dt, essential BCs; fields become v and dv."""
+        """Steps 7-8 / eq. 3-4: (mv) += f dt (with damping if asked), essential BCs (moving
+        with the ground if asked); fields become v and dv."""
         w = self.window
-        K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel, 0, w.shape[0], 0, w.shape[1])
+        if self.ground is not None:
+            self.ground.apply(w, self.t + dt)
+        damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
+                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local)
+        self.damping_work += damped
+        self.external_work += reactions  # supports are external: their work enters the balance
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         w = self.window
-        K.momentum_to_velocity(w.G, source, target, self.mass_cutoff, w.bc_mask, w.bc_vel,
+        K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
                                0, w.shape[0], 0, w.shape[1])
 
     def grid_to_particles(self, remap):
@@ -296,8 +316,9 @@ class Solver:
     def energies(self):
         """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
         work, internal work (integrated stress power: strain + dissipation, exact for any
-        material), external work, and ``total`` = kinetic + internal work, which equals the
-        external work plus the initial kinetic energy when the run conserves energy."""
+        material), external work, damping work, and ``total`` = kinetic + internal work +
+        damping work, which equals the external work plus the initial kinetic energy when the
+        run conserves energy."""
         p = self.particles
         v = p["v"]
         kinetic = 0.5 * float(np.sum(p["m"] * np.sum(v * v, axis=1)))
@@ -306,7 +327,7 @@ class Solver:
             sel = p["mat"] == k
             strain += float(np.sum(p["vol"][sel] * material.elastic_energy_density(p["stress"][sel])))
         plastic = float(np.sum(p["vol"] * p["plastic_work"])) if "plastic_work" in p else 0.0
-        ke, se, pw, wi, we = self.decomp.allreduce_sum(
-            np.array([kinetic, strain, plastic, self.internal_work, self.external_work]))
+        ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(
+            np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work]))
         return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "total": ke + wi}
+                "external_work": we, "damping_work": wd, "total": ke + wi + wd}

@@ -5,39 +5,65 @@ __all__ = ["grid_update", "momentum_to_velocity"]
 
 
 @nb.njit(cache=True)
-def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi):
+def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, damping, owned):
     """(mv) += f dt, then v = (mv)/m with the BCs imposed, over window rows [i_lo, i_hi) x
     [j_lo, j_hi). Afterwards fields 1, 2 hold the new velocity and 3, 4 the velocity change
-    (what FLIP adds to the particles). Nodes lighter than ``mass_cutoff`` get no velocity."""
+    (what FLIP adds to the particles). Nodes lighter than ``mass_cutoff`` get no acceleration.
+
+    ``damping`` (None: off) is the mass-proportional coefficient alpha: the nodal force gains
+    -alpha m v. Returns the energy damping dissipated and the work of the support reactions
+    (the impulses m (v_bc - v_free) that impose the BCs, times the node's mean velocity over
+    the step: a first-order estimate, nearly zero at fixed nodes),
+    summed over the nodes in ``owned`` = (axis, lo, hi) (ghost nodes are summed by their owner)."""
+    dissipated = 0.0
+    reactions = 0.0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
             mi = G[i, j, 0]
-            if mi <= mass_cutoff:
+            if mi <= 0.0:
                 for k in range(1, 5):
                     G[i, j, k] = 0.0
                 continue
             inv_m = 1.0 / mi
+            # a node lighter than the cutoff keeps its velocity (a mass-weighted average of its
+            # particles', always well defined) but gets no acceleration: f / m would be huge
+            accelerate = mi > mass_cutoff
             for d in range(2):
                 v_old = G[i, j, 1 + d] * inv_m
-                v_new = v_old + G[i, j, 3 + d] * dt * inv_m
+                v_new = v_old
+                if accelerate:
+                    f = G[i, j, 3 + d]
+                    if damping is not None:
+                        f -= damping * G[i, j, 1 + d]
+                    v_new = v_old + f * dt * inv_m
+                k = i if owned[0] == 0 else j
+                mine = owned[1] <= k < owned[2]
                 if bc_mask[i, j, d]:
+                    v_free = v_new
                     v_new = bc_vel[i, j, d]
+                    if mine:
+                        # reaction impulse m (v_bc - v_free) through the mean node velocity
+                        reactions += mi * (v_new - v_free) * 0.5 * (v_old + v_new)
                 G[i, j, 1 + d] = v_new
                 G[i, j, 3 + d] = v_new - v_old
+                if damping is not None and mine and accelerate:
+                    dissipated += damping * mi * v_old * 0.5 * (v_old + v_new) * dt
+    return dissipated, reactions
 
 
 @nb.njit(cache=True)
-def momentum_to_velocity(G, src, dst, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi):
+def momentum_to_velocity(G, src, dst, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi):
     """v = (mv)/m from momentum fields ``src`` into fields ``dst`` (may be the same), with the
-    BCs imposed (MUSL re-map; USF start-of-step velocity)."""
+    BCs imposed (MUSL re-map; USF start-of-step velocity). No mass cutoff is needed here:
+    a momentum over a mass is a weighted mean velocity, bounded however light the node."""
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
             mi = G[i, j, 0]
             for d in range(2):
-                if mi <= mass_cutoff:
-                    G[i, j, dst + d] = 0.0
-                elif bc_mask[i, j, d]:
+                if bc_mask[i, j, d]:
                     G[i, j, dst + d] = bc_vel[i, j, d]
+                elif mi <= 0.0:
+                    G[i, j, dst + d] = 0.0
                 else:
                     G[i, j, dst + d] = G[i, j, src + d] / mi
 

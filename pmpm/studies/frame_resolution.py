@@ -43,6 +43,7 @@ DOMAIN_LO = (-0.5, 0.0)
 DOMAIN_HI = (6.6, 4.2)
 VARIANTS = ("elastic", "elastoplastic")
 TRACK = "upper_left_joint"
+ENERGY_INTERVAL = 5e-4   # s between energy samples
 
 
 def frame_scene(variant, cell_size, t_end, case=CASE):
@@ -70,8 +71,10 @@ def run_frame(scene, progress=None):
     Returns
     -------
     dict
-        t, ux, uy (arrays), particles, steps, dt0, wall and cpu time of the stepping loop (s),
-        setup time (s), and the final energies.
+        t, ux, uy (arrays, every ``output.history_interval``), te and the energies (kinetic,
+        strain, plastic work, external work; arrays, every ENERGY_INTERVAL), particles, steps,
+        dt0, wall and cpu time of the stepping loop (s), setup time (s), the final energies and
+        the largest energy-balance gap relative to the external work.
     """
     from mpi4py import MPI
 
@@ -86,8 +89,9 @@ def run_frame(scene, progress=None):
     interval = scene.output.history_interval
     end = scene.solver.end_time
     t, ux, uy = [0.0], [0.0], [0.0]
-    next_sample, next_energy, next_report = interval, 1e-3, 0.1 * end
+    next_sample, next_energy, next_report = interval, ENERGY_INTERVAL, 0.1 * end
     gap = 0.0
+    te, energy = [0.0], [(0.0, 0.0, 0.0, 0.0)]
     w0, c0 = time.perf_counter(), time.process_time()
     while s.t < end * (1 - 1e-12):
         s.step()
@@ -100,14 +104,19 @@ def run_frame(scene, progress=None):
         if s.t >= next_energy - 1e-12:
             e = s.energies()
             gap = max(gap, abs(e["total"] - e["external_work"]))
-            next_energy += 1e-3
+            te.append(s.t)
+            energy.append((e["kinetic"], e["strain"], e["plastic_work"], e["external_work"]))
+            next_energy += ENERGY_INTERVAL
         if progress and s.t >= next_report - 1e-12:
             progress(s.t, end, s.step_count, time.perf_counter() - w0)
             next_report += 0.1 * end
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     e = s.energies()
     gap = max(gap, abs(e["total"] - e["external_work"]))
-    return {"t": np.array(t), "ux": np.array(ux), "uy": np.array(uy), "particles": int(s.n_total),
+    energy = np.array(energy)
+    return {"t": np.array(t), "ux": np.array(ux), "uy": np.array(uy), "te": np.array(te),
+            "kinetic": energy[:, 0], "strain": energy[:, 1], "plastic": energy[:, 2],
+            "external": energy[:, 3], "particles": int(s.n_total),
             "steps": int(s.step_count), "dt0": float(scene.solver.cfl * s.grid.h / s.wave_speed),
             "wall_s": wall, "cpu_s": cpu, "setup_s": setup, "energies": e,
             "energy_gap_rel": gap / e["external_work"] if e["external_work"] else float("nan")}
@@ -166,6 +175,25 @@ def beam_reference(t_end):
             "modal_period_ms": round(float(beam.portal_frame_modes(stub_mass=True)[0]) * 1e3, 2)}
 
 
+def sway_extrema(t, u, t_peak):
+    """Times of the sway maxima and minima after the start: the extreme of each half cycle
+    between successive crossings of the mean level after the first peak (higher-mode ripple
+    does not split a half cycle)."""
+    after = t >= t_peak
+    d = u - float(np.mean(u[after]))
+    k = np.nonzero(np.sign(d[:-1]) != np.sign(d[1:]))[0] + 1
+    bounds = np.concatenate([[0], k, [len(u)]])
+    peaks, troughs = [], []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b - a < 2 or b == len(u):   # the last, unfinished half cycle is left out
+            continue
+        if d[a] > 0:
+            peaks.append(float(t[a + np.argmax(u[a:b])]))
+        else:
+            troughs.append(float(t[a + np.argmin(u[a:b])]))
+    return peaks, troughs
+
+
 def _summary(cell, variant, t_end, run):
     peak, tp, period = peak_and_period(run["t"], run["ux"])
     fallback = mean_level_period(run["t"], run["ux"], tp)
@@ -178,6 +206,9 @@ def _summary(cell, variant, t_end, run):
             "wall_s": run["wall_s"], "cpu_s": run["cpu_s"], "setup_s": run["setup_s"],
             "energy_gap_rel": run["energy_gap_rel"],
             "plastic_work_J": run["energies"]["plastic_work"],
+            "plastic_work_at_sway_peaks_J": ([round(float(np.interp(tp_, run["te"], run["plastic"])), 1)
+                                              for tp_ in sway_extrema(run["t"], run["ux"], tp)[0]]
+                                             if run["plastic"][-1] > 0 else []),
             "external_work_J": run["energies"]["external_work"]}
 
 
@@ -240,6 +271,8 @@ def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stder
             saved[f"h{cell:g}_{variant}_t"] = run["t"]
             saved[f"h{cell:g}_{variant}_ux"] = run["ux"]
             saved[f"h{cell:g}_{variant}_uy"] = run["uy"]
+            for key in ("te", "kinetic", "strain", "plastic", "external"):
+                saved[f"h{cell:g}_{variant}_{key}"] = run[key]
             row["drift_mm"] = None
             if variant == "elastoplastic" and "elastic" in pair:
                 row["drift_mm"] = row["centre_mm"] - pair["elastic"]["centre_mm"]

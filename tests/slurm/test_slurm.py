@@ -187,7 +187,7 @@ SlurmdPort={_free_port()}
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
-AuthInfo=socket={self.munge_socket}
+AuthInfo=socket={self.munge_socket},cred_expire=10
 CredType=cred/munge
 StateSaveLocation={r / 'state'}
 SlurmdSpoolDir={r / 'spool'}
@@ -384,9 +384,13 @@ def test_weak_scaling_sweep_and_gather(cluster):
     assert sorted(rows) == [1, 2], f"table rows for ranks {sorted(rows)}, expected [1, 2]\n{r.stdout}"
     for k, row in rows.items():
         assert row["mode"] == "weak"
-        infl = float(row["work_inflation"])
-        assert math.isfinite(infl) and infl > 0, f"{k} rank(s): work inflation {infl}\n{r.stdout}"
-        assert math.isfinite(float(row["wall_efficiency"])) and float(row["wall_efficiency"]) > 0
+        # The benchmark's compute time is CPU time less the wall time inside MPI calls, floored at 0:
+        # when other work shares the 2 vCPUs, a rank descheduled inside an MPI wait can drive it to 0
+        # at 2 ranks. CPU time including the MPI calls is always positive.
+        infl, with_comm = float(row["work_inflation"]), float(row["work_inflation_with_comm"])
+        assert math.isfinite(infl) and (infl > 0 or k > 1 and infl == 0), f"{k} rank(s): work inflation {infl}\n{r.stdout}"
+        assert math.isfinite(with_comm) and with_comm > 0, f"{k} rank(s): inflation with comm {with_comm}\n{r.stdout}"
+        assert math.isfinite(float(row["wall_efficiency"])) and float(row["wall_efficiency"]) > 0, r.stdout
     assert float(rows[1]["halo_bytes_per_step"]) == 0, r.stdout
     assert float(rows[2]["halo_bytes_per_step"]) > 0, r.stdout
     assert abs(float(rows[1]["wall_efficiency"]) - 1.0) < 1e-12
@@ -397,7 +401,7 @@ def test_weak_scaling_sweep_and_gather(cluster):
     assert md.startswith("| series |") and md.count("\n| weak") == 2, md
 
 
-SCENE = """# a short fixed-free bar (cases/bar.toml, shortened), checkpointed
+SCENE = """# the fixed-free bar of cases/bar.toml (200 particles), checkpointed
 title = "bar for the Slurm job test"
 formulation = "plane_stress"
 particles_per_cell = 2
@@ -434,15 +438,20 @@ cfl = 0.5
 end_time = {end_time}
 
 [output]
-interval = 0.25
-history_interval = 0.05
-checkpoint_interval = 0.25
+interval = {interval}
+history_interval = {history_interval}
+checkpoint_interval = {checkpoint_interval}
 fields = ["x", "v"]
 
 [[output.track]]
 name = "free_end"
 point = [25.0, 0.25]
 """
+
+
+def _scene(end_time, interval=0.25, history_interval=0.05, checkpoint_interval=0.25):
+    return SCENE.format(end_time=end_time, interval=interval, history_interval=history_interval,
+                        checkpoint_interval=checkpoint_interval)
 
 
 def _checkpoint_time(results_dir):
@@ -463,7 +472,7 @@ def test_run_script_restarts_skips_and_passes_exit_code(cluster):
     env = _job_env(CASE=scene, OUTDIR=work / "runs")
 
     # 1. a fresh run to t = 0.5 on 2 ranks
-    scene.write_text(SCENE.format(end_time=0.5))
+    scene.write_text(_scene(end_time=0.5))
     job = cluster.sbatch(JOBS / "slurm_run.sh", ["-n", "2", "--time=10"], env, work)
     out1 = _assert_job(cluster, job, cluster.wait(job, work))
     assert "--restart" not in out1, out1
@@ -472,7 +481,7 @@ def test_run_script_restarts_skips_and_passes_exit_code(cluster):
     assert t1 is not None and abs(t1 - 0.5) < 1e-6, f"newest checkpoint at t = {t1}, expected 0.5\n{out1}"
 
     # 2. the same job again after the end time grew: it continues from the checkpoint at 0.5
-    scene.write_text(SCENE.format(end_time=1.0))
+    scene.write_text(_scene(end_time=1.0))
     job = cluster.sbatch(JOBS / "slurm_run.sh", ["-n", "2", "--time=10"], env, work)
     out2 = _assert_job(cluster, job, cluster.wait(job, work))
     assert "--restart" in out2 and "restarted from" in out2, f"expected a restart\n{out2}"
@@ -488,3 +497,40 @@ def test_run_script_restarts_skips_and_passes_exit_code(cluster):
     job = cluster.sbatch(JOBS / "slurm_run.sh", ["-n", "1", "--time=10"],
                          _job_env(CASE=work / "missing.toml", OUTDIR=work / "runs"), work)
     _assert_job(cluster, job, cluster.wait(job, work), expect_state="FAILED", expect_exit="2:0")
+
+
+def _wait_for_text(cluster, job, workdir, pattern, timeout, after=""):
+    """Wait until the job's output matches ``pattern`` (searched after the text ``after``)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        out = cluster.job_output(job, workdir)
+        tail = out.split(after, 1)[1] if after and after in out else ("" if after else out)
+        if re.search(pattern, tail):
+            return out
+        if cluster.job_info(job).get("JobState") in FINAL_STATES:
+            break
+        time.sleep(0.5)
+    cluster._cmd(["scancel", job], 10)
+    pytest.fail(f"job {job}: no {pattern!r} in its output within {timeout} s "
+                f"(state {cluster.job_info(job).get('JobState')})\n{cluster.job_output(job, workdir)}\n"
+                f"{cluster.diagnostics()}")
+
+
+def test_requeued_run_continues_from_checkpoint(cluster):
+    """scontrol requeue of a running job: the job starts again and continues from the checkpoint."""
+    work = cluster.root / "jobs" / "requeue"
+    work.mkdir(parents=True, exist_ok=True)
+    scene = work / "longbar.toml"
+    # far longer than the test waits: the job is cancelled once it has restarted
+    scene.write_text(_scene(end_time=1e5, interval=1e4, history_interval=1.0, checkpoint_interval=1.0))
+    job = cluster.sbatch(JOBS / "slurm_run.sh", ["-n", "1", "--time=10"],
+                         _job_env(CASE=scene, OUTDIR=work / "runs"), work)
+    _wait_for_text(cluster, job, work, r"checkpoint step \d+ .*written", JOB_TIMEOUT)
+    r = cluster._cmd(["scontrol", "requeue", job], 10)
+    assert r.returncode == 0, f"scontrol requeue {job}: {r.stdout}{r.stderr}"
+    out = _wait_for_text(cluster, job, work, r"restarted from .* at t = ", JOB_TIMEOUT, after="restart count 1")
+    cluster._cmd(["scancel", job], 10)
+    state, _, out = cluster.wait(job, work, 60)
+    second = out.split("restart count 1", 1)[1]
+    assert "restarting from its newest checkpoint" in second and "--restart" in second, out
+    assert cluster.job_info(job).get("Restarts") == "1", out

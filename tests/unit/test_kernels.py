@@ -85,7 +85,7 @@ def test_grid_update_applies_bcs_and_mass_cutoff():
     vel = np.zeros((3, 3, 2))
     mask[1, 1, 0] = 1
     vel[1, 1, 0] = 0.5
-    K.grid_update(G, 0.1, 1e-12, mask, vel, 0, 3, 0, 3)
+    K.grid_update(G, 0.1, 1e-12, mask, vel, 0, 3, 0, 3, None, np.array([0, 0, 3]))
     assert G[2, 2, 1] == pytest.approx(2.0 + 0.1)      # v = (p + f dt) / m
     assert G[2, 2, 3] == pytest.approx(0.1)            # dv = f dt / m
     assert G[1, 1, 1] == 0.5 and G[1, 1, 3] == pytest.approx(0.5 - 2.0)  # prescribed component

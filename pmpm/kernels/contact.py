@@ -1,0 +1,289 @@
+"""Kernels of multi-velocity-field contact (Bardenhagen, Brackbill & Sulsky 2000; Bardenhagen
+et al. 2001): each contact body keeps its own nodal fields.
+
+The body window is ``B[i - ox, j - oy, slot, field]`` (node-interleaved, the slots of a node
+together, then the fields of a slot), with fields
+
+    0 mass | 1, 2 momentum, then velocity after the grid update | 3, 4 force, then velocity change
+    5, 6 mass gradient sum_p m_p grad N_i (scattered with the mass) | 7, 8 re-mapped momentum
+    (MUSL), then re-mapped velocity
+
+i.e. the single-field layout of :mod:`pmpm.kernels` with the mass gradient inserted before the
+re-mapped momentum, so ``B[:, :, s]`` is a single-field window on which the grid-node kernels of
+:mod:`pmpm.kernels.grid_ops` run unchanged. A particle's slot is ``slot_of[body[p]]``. The
+centre-of-mass field is the sum over the slots, formed on the fly where it is needed (nodes
+where two or more slots have mass). With one slot every transfer here does exactly what its
+single-field twin does.
+
+Optional effects are passed as ``None`` (compiled out), the basis as a tag of
+``pmpm.shape.SHAPE_TAGS``, as in :mod:`pmpm.kernels.transfer`.
+"""
+import math
+
+import numba as nb
+
+from ..shape import weights
+from .transfer import _external_force
+
+__all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
+           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "REMAP"]
+
+N_BODY_FIELDS = 9
+MASS, MOM, FORCE, GRAD, REMAP = 0, 1, 3, 5, 7
+
+#: a pair normal shorter than this (the two unit mass gradients nearly parallel, not opposed)
+#: gives no direction: the node is left uncorrected
+_MIN_NORMAL = 1e-6
+
+
+@nb.njit(cache=True)
+def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, load_vec,
+               B, ox, oy, origin, inv_h, ncx, ncy, shape):
+    """:func:`pmpm.kernels.transfer.p2g` into each particle's own slot; with the mass and
+    momentum (``v`` not None) also the mass gradient sum m_p grad N_i (fields 5, 6)."""
+    with_force = stress is not None or gravity is not None or load_id is not None
+    for p in range(x.shape[0]):
+        s = slot_of[body[p]]
+        sx = (x[p, 0] - origin[0]) * inv_h
+        sy = (x[p, 1] - origin[1]) * inv_h
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
+        mp = m[p]
+        if v is not None:
+            mvx = mp * v[p, 0]
+            mvy = mp * v[p, 1]
+            mg = mp * inv_h
+        fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+        if stress is not None:
+            a = -vol[p] * inv_h
+            sxx = a * stress[p, 0]
+            syy = a * stress[p, 1]
+            sxy = a * stress[p, 2]
+        for a_ in range(len(wx)):
+            ii = i0 + a_ - ox
+            for b_ in range(len(wy)):
+                jj = j0 + b_ - oy
+                w = wx[a_] * wy[b_]
+                dnx = gx[a_] * wy[b_]
+                dny = wx[a_] * gy[b_]
+                if v is not None:
+                    B[ii, jj, s, 0] += w * mp
+                    B[ii, jj, s, 1] += w * mvx
+                    B[ii, jj, s, 2] += w * mvy
+                    B[ii, jj, s, 5] += mg * dnx
+                    B[ii, jj, s, 6] += mg * dny
+                if with_force:
+                    fnx = w * fx
+                    fny = w * fy
+                    if stress is not None:
+                        fnx += sxx * dnx + sxy * dny
+                        fny += sxy * dnx + syy * dny
+                    B[ii, jj, s, 3] += fnx
+                    B[ii, jj, s, 4] += fny
+
+
+@nb.njit(cache=True, inline="always")
+def _unit(x, y):
+    n = math.sqrt(x * x + y * y)
+    if n > 0.0:
+        return x / n, y / n
+    return 0.0, 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
+    """The contact correction at node (i, j); see :func:`contact_update`."""
+    ns = B.shape[2]
+    count = 0
+    mtot = 0.0
+    px = 0.0
+    py = 0.0
+    for s in range(ns):
+        ms = B[i, j, s, 0]
+        if ms > mass_cutoff:
+            count += 1
+            mtot += ms
+            px += ms * B[i, j, s, vf]
+            py += ms * B[i, j, s, vf + 1]
+    if count < 2:
+        return 0
+    vcx = px / mtot
+    vcy = py / mtot
+    fix_x = bc_mask[i, j, 0] != 0
+    fix_y = bc_mask[i, j, 1] != 0
+    corrected = 0
+    for b in range(ns):
+        if not B[i, j, b, 0] > mass_cutoff:
+            continue
+        rx = 0.0  # sum of the other slots' unit mass gradients
+        ry = 0.0
+        for c in range(ns):
+            if c != b and B[i, j, c, 0] > mass_cutoff:
+                ux, uy = _unit(B[i, j, c, GRAD], B[i, j, c, GRAD + 1])
+                rx += ux
+                ry += uy
+        ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
+        nx = rx - ux
+        ny = ry - uy
+        nn = math.sqrt(nx * nx + ny * ny)
+        if not nn > _MIN_NORMAL:
+            continue
+        nx /= nn
+        ny /= nn
+        dx = B[i, j, b, vf] - vcx
+        dy = B[i, j, b, vf + 1] - vcy
+        dn = dx * nx + dy * ny
+        if dn > 0.0:  # approaching
+            tx = dx - dn * nx
+            ty = dy - dn * ny
+            cx = -dn * nx
+            cy = -dn * ny
+            st = math.sqrt(tx * tx + ty * ty)
+            if st > 0.0:
+                f = min(mu * dn, st) / st
+                cx -= f * tx
+                cy -= f * ty
+            if fix_x:
+                cx = 0.0
+            if fix_y:
+                cy = 0.0
+            B[i, j, b, vf] += cx
+            B[i, j, b, vf + 1] += cy
+            if dvf >= 0:
+                B[i, j, b, dvf] += cx
+                B[i, j, b, dvf + 1] += cy
+            corrected += 1
+    return corrected
+
+
+@nb.njit(cache=True)
+def contact_update(B, vf, dvf, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi):
+    """Contact correction of the slot velocities in fields ``vf, vf + 1`` (and, if ``dvf`` >= 0,
+    the same change of the velocity changes in ``dvf, dvf + 1``) over window rows [i_lo, i_hi)
+    x [j_lo, j_hi); the velocities already obey the BCs, and constrained components are left
+    alone. Returns the number of corrected (node, slot) pairs.
+
+    Where two or more slots have more mass than ``mass_cutoff``: the centre-of-mass velocity
+    v_cm = sum m_b v_b / sum m_b; for each slot b the outward normal n_b is the normalised
+    difference of the other slots' unit mass gradients and its own (n_b = (g_c - g_b) /
+    |g_c - g_b| for a pair: both share one normal, with opposite signs); if b approaches,
+    (v_b - v_cm) . n_b > 0, its normal relative velocity is removed and its tangential relative
+    velocity reduced by at most ``mu`` times the normal correction (Coulomb: it sticks when that
+    is enough). Separating slots are left alone. Between two slots the corrections conserve
+    momentum exactly (m_a dv_a = -m_b dv_b)."""
+    n = 0
+    for i in range(i_lo, i_hi):
+        for j in range(j_lo, j_hi):
+            n += _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask)
+    return n
+
+
+@nb.njit(cache=True)
+def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, ncx, ncy, shape,
+                        remap):
+    """:func:`pmpm.kernels.transfer.g2p_velocity` from each particle's own slot; the MUSL
+    re-map (``remap``) goes into fields 7, 8 of that slot. Returns the largest speed and the
+    number of non-finite velocities."""
+    vmax2 = 0.0
+    bad = 0
+    flip = 1.0 - pic
+    for p in range(x.shape[0]):
+        s = slot_of[body[p]]
+        sx = (x[p, 0] - origin[0]) * inv_h
+        sy = (x[p, 1] - origin[1]) * inv_h
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
+        dvx = 0.0
+        dvy = 0.0
+        vx = 0.0
+        vy = 0.0
+        for a_ in range(len(wx)):
+            ii = i0 + a_ - ox
+            for b_ in range(len(wy)):
+                jj = j0 + b_ - oy
+                w = wx[a_] * wy[b_]
+                vx += w * B[ii, jj, s, 1]
+                vy += w * B[ii, jj, s, 2]
+                dvx += w * B[ii, jj, s, 3]
+                dvy += w * B[ii, jj, s, 4]
+        nvx = flip * (v[p, 0] + dvx) + pic * vx
+        nvy = flip * (v[p, 1] + dvy) + pic * vy
+        v[p, 0] = nvx
+        v[p, 1] = nvy
+        speed2 = nvx * nvx + nvy * nvy
+        if speed2 > vmax2:
+            vmax2 = speed2
+        elif not speed2 < 1e300:  # NaN or inf
+            bad += 1
+        if remap:
+            mvx = m[p] * nvx
+            mvy = m[p] * nvy
+            for a_ in range(len(wx)):
+                ii = i0 + a_ - ox
+                for b_ in range(len(wy)):
+                    jj = j0 + b_ - oy
+                    w = wx[a_] * wy[b_]
+                    B[ii, jj, s, 7] += w * mvx
+                    B[ii, jj, s, 8] += w * mvy
+    return vmax2 ** 0.5, bad
+
+
+@nb.njit(cache=True)
+def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, move, dt,
+                          gravity, load_id, load_w, load_vec,
+                          B, ox, oy, origin, inv_h, ncx, ncy, shape):
+    """:func:`pmpm.kernels.transfer.g2p_kinematics` from each particle's own slot: strain
+    increment from its velocity field ``vel_field`` (body layout), position update with its
+    updated velocity (fields 1, 2). Returns the work of the external forces over the moves."""
+    work = 0.0
+    for p in range(x.shape[0]):
+        s = slot_of[body[p]]
+        sx = (x[p, 0] - origin[0]) * inv_h
+        sy = (x[p, 1] - origin[1]) * inv_h
+        i0, wx, gx = weights(shape, sx, ncx)
+        j0, wy, gy = weights(shape, sy, ncy)
+        lxx = 0.0
+        lxy = 0.0
+        lyx = 0.0
+        lyy = 0.0
+        ux = 0.0
+        uy = 0.0
+        for a_ in range(len(wx)):
+            ii = i0 + a_ - ox
+            for b_ in range(len(wy)):
+                jj = j0 + b_ - oy
+                if de is not None:
+                    dnx = gx[a_] * wy[b_]
+                    dny = wx[a_] * gy[b_]
+                    gvx = B[ii, jj, s, vel_field]
+                    gvy = B[ii, jj, s, vel_field + 1]
+                    lxx += gvx * dnx
+                    lxy += gvx * dny
+                    lyx += gvy * dnx
+                    lyy += gvy * dny
+                if move:
+                    w = wx[a_] * wy[b_]
+                    ux += w * B[ii, jj, s, 1]
+                    uy += w * B[ii, jj, s, 2]
+        if de is not None:
+            c = dt * inv_h
+            dexx = c * lxx
+            deyy = c * lyy
+            dgxy = c * (lxy + lyx)
+            de[p, 0] = dexx
+            de[p, 1] = deyy
+            de[p, 2] = dgxy
+            if dw is not None:
+                dw[p] = 0.5 * c * (lyx - lxy)
+            strain[p, 0] += dexx
+            strain[p, 1] += deyy
+            strain[p, 2] += dgxy
+            vol[p] *= 1.0 + dexx + deyy
+        if move:
+            ux *= dt
+            uy *= dt
+            x[p, 0] += ux
+            x[p, 1] += uy
+            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+            work += fx * ux + fy * uy
+    return work
