@@ -26,7 +26,7 @@ MATERIALS = {
 
 
 def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc=2, aspect=1.0,
-                gravity=None, force=False, extra_solver=None):
+                gravity=None, force=False, extra_solver=None, extra_loads=None):
     """A square (or ``aspect`` wide) elastic block filling a grid, loaded hard enough to yield.
 
     The block is clamped at its base and starts with a shear velocity field (2 m/s at the
@@ -49,8 +49,8 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
         "solver": {"shape_function": shape, "scheme": scheme, "end_time": 1.0, "cfl": 0.5,
                    **(extra_solver or {})},
     }
-    if gravity or force:
-        data["loads"] = {}
+    if gravity or force or extra_loads:
+        data["loads"] = dict(extra_loads or {})
         if gravity:
             data["loads"]["gravity"] = [0.0, -9.81]
         if force:
@@ -117,6 +117,56 @@ def throughput(args):
     return 0
 
 
+def _effect_scenes(n, record):
+    """The same block with one effect switched on at a time (name -> scene)."""
+    gm = {"ground_motion": {"file": record, "direction": "x"}}
+    return {
+        "none": block_scene(n),
+        "gravity": block_scene(n, gravity=True),
+        "force (step)": block_scene(n, force=True),
+        "damping": block_scene(n, extra_loads={"damping": 0.5}),
+        "ground motion": block_scene(n, extra_loads=gm),
+        "large rotations": block_scene(n, extra_solver={"large_rotations": True}),
+        "plasticity (smooth_vonmises)": block_scene(n, material="smooth_vonmises"),
+    }
+
+
+def effects(args):
+    """Cost of each optional effect alone: CPU ns per particle-step with and without it."""
+    import os
+    import tempfile
+    from mpi4py import MPI
+    from .solver import Solver
+    with tempfile.TemporaryDirectory() as tmp:
+        record = os.path.join(tmp, "record.txt")
+        t = np.linspace(0.0, 10.0, 2001)
+        np.savetxt(record, np.column_stack([t, 0.5 * np.sin(2 * np.pi * t)]))
+        solvers = {name: Solver(scene, MPI.COMM_SELF) for name, scene in _effect_scenes(args.particles, record).items()}
+        for s in solvers.values():  # compile and first-touch
+            for _ in range(3):
+                s.step()
+        samples = {name: [] for name in solvers}
+        for _ in range(args.repeat):  # round robin, so drifts of the machine hit every variant alike
+            for name, s in solvers.items():
+                t0 = time.process_time()
+                for _ in range(args.steps):
+                    s.step()
+                samples[name].append((time.process_time() - t0) / (args.steps * s.particles.n) * 1e9)
+    base = statistics.median(samples["none"])
+    print(f"pmpm bench effects: {args.particles} particles, {args.steps} steps x {args.repeat} "
+          f"(CPU time, median)")
+    print(f"{'effect':32s} {'ns/particle-step':>17s} {'overhead':>9s}  {'spread':>8s}")
+    rows = {}
+    for name, vals in samples.items():
+        med = statistics.median(vals)
+        spread = (max(vals) - min(vals)) / med
+        rows[name] = {"ns_per_particle_step": med, "overhead": med / base - 1, "spread": spread}
+        print(f"{name:32s} {med:17.1f} {100 * (med / base - 1):8.1f}%  {100 * spread:7.1f}%")
+    print(json.dumps({"particles": args.particles, "steps": args.steps, "repeat": args.repeat,
+                      "effects": rows}))
+    return 0
+
+
 def add_bench_parser(sub):
     """Register ``pmpm bench throughput|scaling`` on an argparse sub-parser set."""
     b = sub.add_parser("bench", help="benchmarks (throughput, scaling)")
@@ -128,6 +178,10 @@ def add_bench_parser(sub):
     t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
     t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    e = bs.add_parser("effects", help="cost of each optional effect alone")
+    e.add_argument("--particles", type=int, default=100_000)
+    e.add_argument("--steps", type=int, default=10)
+    e.add_argument("--repeat", type=int, default=5)
     s = bs.add_parser("scaling", help="run under mpirun: compute/communication split per rank")
     s.add_argument("--mode", choices=["strong", "weak"], default="strong")
     s.add_argument("--particles", type=int, default=1_000_000)
@@ -139,5 +193,7 @@ def main(args):
     """Dispatch ``pmpm bench <name>``."""
     if args.bench == "throughput":
         return throughput(args)
+    if args.bench == "effects":
+        return effects(args)
     from .scaling import scaling
     return scaling(args)

@@ -123,8 +123,8 @@ def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
                 rx += ux
                 ry += uy
         ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
-        nx = rx - ux
-        ny = ry - uy
+        nx = ux - rx
+        ny = uy - ry
         nn = math.sqrt(nx * nx + ny * ny)
         if not nn > _MIN_NORMAL:
             continue
@@ -165,8 +165,11 @@ def contact_update(B, vf, dvf, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi)
 
     Where two or more slots have more mass than ``mass_cutoff``: the centre-of-mass velocity
     v_cm = sum m_b v_b / sum m_b; for each slot b the outward normal n_b is the normalised
-    difference of the other slots' unit mass gradients and its own (n_b = (g_c - g_b) /
-    |g_c - g_b| for a pair: both share one normal, with opposite signs); if b approaches,
+    difference of its own unit mass gradient and the other slots' (n_b = (g_b - g_c) /
+    |g_b - g_c| for a pair: both share one normal, with opposite signs). The mass gradient
+    g_b = sum_p m_p grad N_i(x_p) points *out* of body b (grad N_i at a particle points towards
+    the node, i.e. away from the particles: it is minus the gradient of the smoothed density
+    at the node). If b approaches,
     (v_b - v_cm) . n_b > 0, its normal relative velocity is removed and its tangential relative
     velocity reduced by at most ``mu`` times the normal correction (Coulomb: it sticks when that
     is enough). Separating slots are left alone. Between two slots the corrections conserve

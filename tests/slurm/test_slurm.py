@@ -160,7 +160,7 @@ class Cluster:
     def start(self):
         for d in ("state", "spool", "log", "munge", "jobs"):
             (self.root / d).mkdir(parents=True, exist_ok=True)
-        (self.root / "munge").chmod(0o700)
+        (self.root / "munge").chmod(0o755)  # munged wants its socket folder traversable by all
         key = self.root / "munge" / "munge.key"
         key.write_bytes(os.urandom(1024))
         key.chmod(0o400)
