@@ -30,6 +30,7 @@ QUEUE="${QUEUE:-}"                       # empty: the server's default queue
 ACCOUNT="${ACCOUNT:-}"                   # empty: no -A (project / account string)
 PMPM_HOME="${PMPM_HOME:-}"               # pmpm checkout with .venv (./setup.sh); empty: this script's
                                          # checkout (bash jobs/...) or the submit directory (qsub jobs/...)
+MODULES="${MODULES:-}"                   # `module load` these first (e.g. "openmpi hdf5"); empty: none
 OUTDIR="${OUTDIR:-runs}"                 # pmpm runs here and writes <stem>_results/ in it; relative
                                          # paths are from the submit directory
 # -------------------------------------------------------------------------------------------------
@@ -38,7 +39,7 @@ OUTDIR="${OUTDIR:-runs}"                 # pmpm runs here and writes <stem>_resu
 if [ -z "${PBS_JOBID:-}" ]; then
     here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
     PMPM_HOME="${PMPM_HOME:-$(dirname "$here")}"
-    export CASE VARIANT NTASKS PMPM_HOME OUTDIR
+    export CASE VARIANT NTASKS PMPM_HOME MODULES OUTDIR
     per_node=$(( (NTASKS + NODES - 1) / NODES ))
     opts=(-l "select=$NODES:ncpus=$per_node:mpiprocs=$per_node" -l "walltime=$TIME" -V)
     [ -n "$QUEUE" ] && opts+=(-q "$QUEUE")
@@ -52,6 +53,10 @@ PMPM_HOME="${PMPM_HOME:-$PWD}"
 if [ ! -f "$PMPM_HOME/.venv/bin/activate" ]; then
     echo "error: $PMPM_HOME/.venv/bin/activate not found: set PMPM_HOME to a pmpm checkout set up with ./setup.sh" >&2
     exit 2
+fi
+if [ -n "$MODULES" ]; then
+    # shellcheck disable=SC2086
+    module load $MODULES || exit 1
 fi
 # shellcheck disable=SC1091
 . "$PMPM_HOME/.venv/bin/activate"

@@ -31,6 +31,7 @@ PARTITION="${PARTITION:-}"               # empty: the cluster's default partitio
 ACCOUNT="${ACCOUNT:-}"                   # empty: your default account
 PMPM_HOME="${PMPM_HOME:-}"               # pmpm checkout with .venv (./setup.sh); empty: this script's
                                          # checkout (bash jobs/...) or the submit directory (sbatch jobs/...)
+MODULES="${MODULES:-}"                   # `module load` these first (e.g. "openmpi hdf5"); empty: none
 OUTDIR="${OUTDIR:-runs}"                 # pmpm runs here and writes <stem>_results/ in it; relative
                                          # paths are from the submit directory
 LAUNCHER="${LAUNCHER:-mpirun}"           # mpirun, or srun: `srun --mpi=pmix -n $N` (Slurm starts the
@@ -41,7 +42,7 @@ LAUNCHER="${LAUNCHER:-mpirun}"           # mpirun, or srun: `srun --mpi=pmix -n 
 if [ -z "${SLURM_JOB_ID:-}" ]; then
     here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
     PMPM_HOME="${PMPM_HOME:-$(dirname "$here")}"
-    export CASE VARIANT NTASKS PMPM_HOME OUTDIR LAUNCHER
+    export CASE VARIANT NTASKS PMPM_HOME MODULES OUTDIR LAUNCHER
     opts=(--ntasks="$NTASKS" --time="$TIME" --export=ALL)
     [ -n "$PARTITION" ] && opts+=(--partition="$PARTITION")
     [ -n "$ACCOUNT" ] && opts+=(--account="$ACCOUNT")
@@ -53,6 +54,10 @@ PMPM_HOME="${PMPM_HOME:-${SLURM_SUBMIT_DIR:-$PWD}}"
 if [ ! -f "$PMPM_HOME/.venv/bin/activate" ]; then
     echo "error: $PMPM_HOME/.venv/bin/activate not found: set PMPM_HOME to a pmpm checkout set up with ./setup.sh" >&2
     exit 2
+fi
+if [ -n "$MODULES" ]; then
+    # shellcheck disable=SC2086
+    module load $MODULES || exit 1
 fi
 # shellcheck disable=SC1091
 . "$PMPM_HOME/.venv/bin/activate"

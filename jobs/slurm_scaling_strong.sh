@@ -30,6 +30,7 @@ PARTITION="${PARTITION:-}"            # empty: the cluster's default partition
 ACCOUNT="${ACCOUNT:-}"                # empty: your default account
 PMPM_HOME="${PMPM_HOME:-}"            # pmpm checkout with .venv (./setup.sh); empty: this script's checkout
                                       # (bash jobs/...) or the submit directory (sbatch jobs/...)
+MODULES="${MODULES:-}"                # `module load` these first (e.g. "openmpi hdf5"); empty: none
 OUTDIR="${OUTDIR:-scaling}"           # run logs go here; relative paths are from the submit directory
 RESULTS="${RESULTS:-}"                # JSON-lines file to append to; empty: OUTDIR/scaling_strong.jsonl
 # -------------------------------------------------------------------------------------------------
@@ -39,7 +40,7 @@ MODE=strong
 if [ -z "${SLURM_JOB_ID:-}" ]; then
     here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
     PMPM_HOME="${PMPM_HOME:-$(dirname "$here")}"
-    export RANKS PARTICLES STEPS REPEAT OVERSUBSCRIBE PMPM_HOME OUTDIR RESULTS
+    export RANKS PARTICLES STEPS REPEAT OVERSUBSCRIBE PMPM_HOME MODULES OUTDIR RESULTS
     opts=(--ntasks="$NTASKS" --time="$TIME" --export=ALL)
     [ -n "$PARTITION" ] && opts+=(--partition="$PARTITION")
     [ -n "$ACCOUNT" ] && opts+=(--account="$ACCOUNT")
@@ -52,6 +53,10 @@ PMPM_HOME="${PMPM_HOME:-${SLURM_SUBMIT_DIR:-$PWD}}"
 if [ ! -f "$PMPM_HOME/.venv/bin/activate" ]; then
     echo "error: $PMPM_HOME/.venv/bin/activate not found: set PMPM_HOME to a pmpm checkout set up with ./setup.sh" >&2
     exit 2
+fi
+if [ -n "$MODULES" ]; then
+    # shellcheck disable=SC2086
+    module load $MODULES || exit 1
 fi
 # shellcheck disable=SC1091
 . "$PMPM_HOME/.venv/bin/activate"

@@ -77,9 +77,14 @@ class Particles:
         return Particles({k: np.ascontiguousarray(a[index]) for k, a in self.fields.items()})
 
     def reorder(self, order):
-        """Permute every field in place (``order`` is a permutation of 0..n-1)."""
+        """Permute every field in place (``order`` is a permutation of 0..n-1), without a second
+        copy of any field: the particle arrays are most of a run's memory."""
+        from .kernels import permute_rows
+        visited = np.empty(self.n, dtype=np.bool_)
         for k, a in self.fields.items():
-            self.fields[k] = np.ascontiguousarray(a[order])
+            a = np.ascontiguousarray(a)
+            permute_rows(a.reshape(self.n, -1).view(np.uint8), order, visited)
+            self.fields[k] = a
 
     @staticmethod
     def concatenate(parts):

@@ -14,25 +14,37 @@ from .bodies import generate_body
 from .errors import ConfigError
 from .particles import CORE_FIELDS, Particles
 
-__all__ = ["create_particles", "choose_axis", "make_decomposition"]
+__all__ = ["place_points", "create_particles", "choose_axis", "make_decomposition"]
 logger = logging.getLogger(__name__)
 
 
-def create_particles(scene, grid, materials, labels):
-    """All of the scene's material points as one ``Particles`` (identical on every rank)."""
+def place_points(scene, grid, materials, labels):
+    """Positions, velocities, volumes, masses, material and body of every point of the scene
+    (identical on every rank): the few fields needed to decide who owns what."""
     scene_dir = os.path.dirname(scene.path) if os.path.isabs(scene.path) else "."
     parts = []
     for k, body in enumerate(scene.bodies):
         mat_index = labels.index(body.material)
         pts = generate_body(k, body, grid, materials[mat_index].density, scene_dir)
         n = len(pts["m"])
-        fields = {name: np.zeros((n, *shape), dtype) for name, (shape, dtype) in CORE_FIELDS.items()}
-        fields.update(x=pts["x"], x0=pts["x"].copy(), v=pts["v"], vol=pts["vol"], m=pts["m"])
-        fields["mat"][:] = mat_index
-        fields["body"][:] = k
-        parts.append(Particles(fields))
-    particles = Particles.concatenate(parts)
-    particles["id"] = np.arange(particles.n, dtype=np.int64)
+        pts["mat"] = np.full(n, mat_index, dtype=np.int32)
+        pts["body"] = np.full(n, k, dtype=np.int32)
+        parts.append(pts)
+    return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+
+
+def create_particles(points, keep, materials):
+    """The full particle state of the points selected by ``keep`` (a boolean mask): core
+    fields, material state, and the global id (the point's index in the scene). Only the
+    owned points get full fields, so no rank ever holds the whole scene's state."""
+    idx = np.nonzero(keep)[0]
+    n = len(idx)
+    fields = {name: np.zeros((n, *shape), dtype) for name, (shape, dtype) in CORE_FIELDS.items()}
+    for key in ("x", "v", "vol", "m", "mat", "body"):
+        fields[key][...] = points[key][idx]
+    fields["x0"][...] = fields["x"]
+    fields["id"][...] = idx
+    particles = Particles(fields)
     for material in materials:
         for name, shape in material.state_fields.items():
             particles.add_field(name, shape)

@@ -25,7 +25,7 @@ from .groundmotion import GroundMotion
 from .loads import Loads
 from .materials import make_material
 from .schemes import make_scheme
-from .setup_particles import choose_axis, create_particles, make_decomposition
+from .setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from .shape import SHAPE_TAGS, ghost_width, min_cells
 from .errors import ConfigError
 
@@ -71,12 +71,13 @@ class Solver:
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
                        if scene.loads.ground_motion else None)
         self.damping = scene.loads.damping or None  # None compiles the damping out
-        everything = create_particles(scene, self.grid, self.materials, self.labels)
-        self.n_total = everything.n
+        points = place_points(scene, self.grid, self.materials, self.labels)
+        self.n_total = len(points["m"])
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
-                                         ghost_width(cfg.shape_function), everything["x"])
-        self.particles = everything.take(self._owned(everything["x"]))
+                                         ghost_width(cfg.shape_function), points["x"])
+        self.particles = create_particles(points, self._owned(points["x"]), self.materials)
+        del points
         self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
         self._build_window()
         self.wave_speed = max(m.wave_speed() for m in self.materials)
@@ -320,13 +321,11 @@ class Solver:
         damping work, which equals the external work plus the initial kinetic energy when the
         run conserves energy."""
         p = self.particles
-        v = p["v"]
-        kinetic = 0.5 * float(np.sum(p["m"] * np.sum(v * v, axis=1)))
-        strain = 0.0
-        for k, material in enumerate(self.materials):
-            sel = p["mat"] == k
-            strain += float(np.sum(p["vol"][sel] * material.elastic_energy_density(p["stress"][sel])))
-        plastic = float(np.sum(p["vol"] * p["plastic_work"])) if "plastic_work" in p else 0.0
+        kinetic = K.kinetic_energy(p["m"], p["v"])
+        several = len(self.materials) > 1
+        strain = sum(K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
+                     for k, m in enumerate(self.materials))
+        plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
         ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(
             np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work]))
         return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,

@@ -10,14 +10,15 @@ Optional effects are passed as ``None`` when the scene does not ask for them: nu
 separate specialisation in which the branch does not exist (no flag is tested in the loops).
 The shape function is passed as a jitted function and inlined the same way.
 """
-from .grid_ops import grid_update, momentum_to_velocity, stress_power
+from .grid_ops import (elastic_energy, grid_update, kinetic_energy, momentum_to_velocity,
+                       stress_power)
 from .transfer import p2g, g2p_velocity, g2p_kinematics
 from .objective import jaumann_rotate
-from .sort import cell_order
+from .sort import cell_order, permute_rows
 from .locate import count_strays, cell_columns
 
-__all__ = ["p2g", "g2p_velocity", "stress_power", "g2p_kinematics", "grid_update", "momentum_to_velocity",
-           "jaumann_rotate", "cell_order", "count_strays", "cell_columns", "N_FIELDS", "MASS", "MOM", "FORCE", "REMAP"]
+__all__ = ["p2g", "g2p_velocity", "stress_power", "kinetic_energy", "elastic_energy", "g2p_kinematics", "grid_update", "momentum_to_velocity",
+           "jaumann_rotate", "cell_order", "permute_rows", "count_strays", "cell_columns", "N_FIELDS", "MASS", "MOM", "FORCE", "REMAP"]
 
 N_FIELDS = 7
 MASS, MOM, FORCE, REMAP = 0, 1, 3, 5

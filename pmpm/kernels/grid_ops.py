@@ -76,3 +76,26 @@ def stress_power(stress, de, vol):
     for p in range(stress.shape[0]):
         w += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
     return w
+
+
+@nb.njit(cache=True)
+def kinetic_energy(m, v):
+    """sum_p 1/2 m_p |v_p|^2 without temporaries."""
+    e = 0.0
+    for p in range(m.shape[0]):
+        e += m[p] * (v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])
+    return 0.5 * e
+
+
+@nb.njit(cache=True)
+def elastic_energy(stress, vol, E, nu, mat_ids, which):
+    """sum_p V_p 1/2 sigma : C^-1 : sigma (isotropic C, 4-component stress) over the particles
+    of material ``which`` (-1: all), without temporaries."""
+    e = 0.0
+    for p in range(stress.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        sxx, syy, sxy, szz = stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3]
+        normal = sxx * sxx + syy * syy + szz * szz - 2 * nu * (sxx * syy + syy * szz + szz * sxx)
+        e += vol[p] * (0.5 * normal / E + (1 + nu) / E * sxy * sxy)
+    return e

@@ -2,7 +2,7 @@
 import numba as nb
 import numpy as np
 
-__all__ = ["cell_order"]
+__all__ = ["cell_order", "permute_rows"]
 
 
 @nb.njit(cache=True)
@@ -12,7 +12,7 @@ def cell_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
     n = x.shape[0]
     ny = j_hi - j_lo
     ncell = (i_hi - i_lo) * ny
-    key = np.empty(n, dtype=np.int64)
+    key = np.empty(n, dtype=np.int32)
     count = np.zeros(ncell + 1, dtype=np.int64)
     for p in range(n):
         i = int(np.floor((x[p, 0] - origin[0]) * inv_h)) - i_lo
@@ -33,3 +33,25 @@ def cell_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
         order[start[k]] = p
         start[k] += 1
     return order
+
+
+@nb.njit(cache=True)
+def permute_rows(a, order, visited):
+    """In place ``a[:] = a[order]`` for a 2-D byte view of a field, by following the cycles of
+    the permutation: one row of scratch instead of a second copy of the field."""
+    n = a.shape[0]
+    visited[:] = False
+    tmp = np.empty(a.shape[1], dtype=a.dtype)
+    for start in range(n):
+        if visited[start]:
+            continue
+        tmp[:] = a[start]
+        i = start
+        while True:
+            visited[i] = True
+            j = order[i]
+            if j == start:
+                a[i] = tmp
+                break
+            a[i] = a[j]
+            i = j

@@ -36,7 +36,8 @@ import time
 
 import numpy as np
 
-__all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main"]
+__all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main",
+           "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile"]
 
 CASE = os.path.join(os.path.dirname(__file__), "..", "..", "cases", "portal_frame.toml")
 DOMAIN_LO = (-0.5, 0.0)
@@ -157,22 +158,253 @@ def oscillation_centre(t, u, period):
     return float(np.trapezoid(uu, tt) / (tt[-1] - tt[0]))
 
 
+def _beam_module():
+    """tests/verification/frame_beam_model.py (NumPy only), or None when the tests are not next
+    to this package."""
+    here = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "tests", "verification"))
+    if not os.path.exists(os.path.join(here, "frame_beam_model.py")):
+        return None
+    sys.path.insert(0, here)
+    try:
+        import frame_beam_model
+    finally:
+        sys.path.pop(0)
+    return frame_beam_model
+
+
 def beam_reference(t_end):
     """The Euler-Bernoulli frame model of tests/verification (centre lines, stub mass), through the
     same estimator; None when the tests are not next to this package."""
-    here = os.path.join(os.path.dirname(__file__), "..", "..", "tests", "verification")
-    if not os.path.exists(os.path.join(here, "frame_beam_model.py")):
+    beam = _beam_module()
+    if beam is None:
         return None
-    sys.path.insert(0, os.path.abspath(here))
-    try:
-        import frame_beam_model as beam
-    finally:
-        sys.path.pop(0)
     tb, ub = beam.portal_frame_response(t_end=t_end, stub_mass=True)
     peak, tp, period = peak_and_period(tb, ub)
     return {"model": "Euler-Bernoulli, centre lines, column-stub mass (frame_beam_model.py)",
             "peak_mm": round(peak * 1e3, 3), "t_peak_s": round(tp, 5), "period_ms": round(period * 1e3, 2),
             "modal_period_ms": round(float(beam.portal_frame_modes(stub_mass=True)[0]) * 1e3, 2)}
+
+
+# --------------------------------------------------------------------------------------------------
+# Estimates of the continuum effects (no MPM run): the beam model of tests/verification extended
+# with Timoshenko shear flexibility and a Krawinkler joint-panel spring (docs/portal_frame.md)
+# --------------------------------------------------------------------------------------------------
+def shear_area(eta, thickness, depth):
+    """Energy-consistent shear area I^2 / int(Q^2 / t) of a section made of equal bands of
+    ``depth / len(eta)`` centred at ``eta`` with the given thicknesses (Q: first moment of the
+    part beyond eta, evaluated at each band's centre)."""
+    order = np.argsort(eta)
+    eta, t = np.asarray(eta, float)[order], np.asarray(thickness, float)[order]
+    dy = depth / len(eta)
+    inertia = np.sum(t * eta ** 2) * dy
+    q = np.array([np.sum(t[k + 1:] * eta[k + 1:]) * dy + 0.5 * t[k] * eta[k] * dy for k in range(len(eta))])
+    return inertia ** 2 / (np.sum(q ** 2 / t) * dy)
+
+
+def section_shear_area(sec, rows=20000):
+    """Shear area of the idealised W shape (flanges bf x tf, web tw), by :func:`shear_area`."""
+    d = sec["d"]
+    eta = -d / 2 + (np.arange(rows) + 0.5) * d / rows
+    t = np.where(np.abs(eta) > d / 2 - sec["tf"], sec["bf"], sec["tw"])
+    return shear_area(eta, t, d)
+
+
+def strip_profile(cell_size, body_name, case=CASE):
+    """Rows (distance from the member axis) and out-of-plane thickness per row of a member strip as
+    pmpm generates it at ``cell_size`` (the thicknesses are scaled so the strip's A and I match)."""
+    from pmpm.bodies import body_points
+    from pmpm.grid import Grid
+
+    scene = frame_scene("elastic", cell_size, 0.25, case)
+    body = next(b for b in scene.bodies if b.name == body_name)
+    geo = body.geometry
+    cells = [int(round((hi - lo) / cell_size)) for lo, hi in zip(DOMAIN_LO, DOMAIN_HI)]
+    pts, vol = body_points(body, Grid(DOMAIN_LO, cell_size, cells), os.path.dirname(case), body_name)
+    start, end = np.asarray(geo["start"]), np.asarray(geo["end"])
+    length = float(np.linalg.norm(end - start))
+    direction = (end - start) / length
+    normal = np.array([-direction[1], direction[0]])
+    eta = np.round((pts - start) @ normal, 9)
+    rows, first = np.unique(eta, return_index=True)
+    thickness = vol[first] / (length * geo["depth"] / len(pts))
+    return rows, thickness, geo
+
+
+def _timoshenko_local(E, G, A, I, L, shear_area_):
+    """Local stiffness (u1, v1, th1, u2, v2, th2) of a Timoshenko frame element (Euler-Bernoulli
+    when ``shear_area_`` is None)."""
+    phi = 0.0 if shear_area_ is None else 12.0 * E * I / (G * shear_area_ * L ** 2)
+    k = np.zeros((6, 6))
+    a = E * A / L
+    k[np.ix_([0, 3], [0, 3])] = a * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    b = E * I / (L ** 3 * (1.0 + phi))
+    k[np.ix_([1, 2, 4, 5], [1, 2, 4, 5])] = b * np.array(
+        [[12.0, 6 * L, -12.0, 6 * L], [6 * L, (4 + phi) * L ** 2, -6 * L, (2 - phi) * L ** 2],
+         [-12.0, -6 * L, 12.0, -6 * L], [6 * L, (2 - phi) * L ** 2, -6 * L, (4 + phi) * L ** 2]])
+    return k
+
+
+def _element_transform(c, s, off_i, off_j):
+    """Global node dofs -> local dofs at the flexible ends (rotation after rigid offsets)."""
+    r = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    rot = np.zeros((6, 6))
+    rot[:3, :3] = r
+    rot[3:, 3:] = r
+    link = np.eye(6)
+    for base, (ex, ey) in ((0, off_i), (3, off_j)):
+        link[base, base + 2] = -ey
+        link[base + 1, base + 2] = ex
+    return rot @ link
+
+
+def extended_frame(geometry="clear", stub_mass=True, column_shear=None, beam_shear=None, panel=None,
+                   elements_per_member=8):
+    """Stiffness and mass of the frame model of tests/verification with optional Timoshenko shear
+    areas (m^2) for the columns and the beam and a joint-panel rotational spring ``panel``
+    (N m / rad) between each column top and the beam end (the beam end shares the joint's
+    translations, not its rotation). Returns K, M (free dofs), the loaded dof, the panel
+    rotation dofs (column, beam) of the left joint, and the frame module."""
+    bm = _beam_module()
+    if bm is None:
+        raise RuntimeError("tests/verification/frame_beam_model.py not found")
+    model, loaded = bm.portal_frame_model(elements_per_member, geometry, "handbook", stub_mass)
+    g_mod = bm.E_STEEL / (2 * (1 + bm.NU_STEEL))
+    tops = [k for k, (x, y) in enumerate(model.nodes) if abs(y - bm.HEIGHT) < 1e-9 and k in (1, 3)]
+    ndof = 3 * len(model.nodes)
+    beam_rot = {}
+    if panel:
+        for k in tops:
+            beam_rot[k] = ndof
+            ndof += 1
+    K, M = np.zeros((ndof, ndof)), np.zeros((ndof, ndof))
+    for el in model.elements:
+        xi = np.add(model.nodes[el["i"]], el["off_i"])
+        xj = np.add(model.nodes[el["j"]], el["off_j"])
+        length = float(np.hypot(*(xj - xi)))
+        c, s = (xj - xi) / length
+        is_beam = abs(c) > 0.5
+        t = _element_transform(c, s, el["off_i"], el["off_j"])
+        area_s = beam_shear if is_beam else column_shear
+        k = t.T @ _timoshenko_local(el["E"], g_mod, el["A"], el["I"], length, area_s) @ t
+        m = t.T @ bm.frame_element_mass(el["rho"], el["A"], length) @ t
+        dofs = []
+        for node in (el["i"], el["j"]):
+            rot = beam_rot.get(node, 3 * node + 2) if is_beam else 3 * node + 2
+            dofs += [3 * node, 3 * node + 1, rot]
+        K[np.ix_(dofs, dofs)] += k
+        M[np.ix_(dofs, dofs)] += m
+    for node, mass in model.point_masses.items():
+        M[3 * node, 3 * node] += mass
+        M[3 * node + 1, 3 * node + 1] += mass
+    for node, dof in beam_rot.items():
+        a, b = 3 * node + 2, dof
+        K[a, a] += panel
+        K[b, b] += panel
+        K[a, b] -= panel
+        K[b, a] -= panel
+    fixed = np.fromiter(model.fixed, int, len(model.fixed))
+    free = np.setdiff1d(np.arange(ndof), fixed)
+    K, M = K[np.ix_(free, free)], M[np.ix_(free, free)]
+    where = lambda dof: int(np.searchsorted(free, dof))  # noqa: E731
+    panel_dofs = (where(3 * tops[0] + 2), where(beam_rot[tops[0]])) if panel else None
+    return K, M, where(3 * loaded), panel_dofs, bm
+
+
+def frame_estimate(t_end=0.1, dt=2e-5, **kw):
+    """Static lateral stiffness, static and step-response displacement of the loaded joint, the
+    sway period (test estimator and first mode) and, with a panel, its static shear rotation and
+    moment, for :func:`extended_frame` ``**kw``."""
+    K, M, ix, panel_dofs, bm = extended_frame(**kw)
+    f = np.zeros(len(K))
+    f[ix] = bm.LOAD
+    u = np.linalg.solve(K, f)
+    w2, _ = bm.generalized_eigen(K, M)
+    t, hist = bm.newmark_average_acceleration(K, M, f, dt, int(round(t_end / dt)))
+    peak, tp, period = peak_and_period(t, hist[:, ix])
+    out = {"k_N_per_m": bm.LOAD / u[ix], "static_mm": u[ix] * 1e3, "peak_mm": peak * 1e3, "t_peak_s": tp,
+           "period_ms": period * 1e3, "mode1_ms": 2e3 * np.pi / np.sqrt(w2[0])}
+    if panel_dofs:
+        gamma = u[panel_dofs[1]] - u[panel_dofs[0]]
+        out["panel_rotation_mrad"] = gamma * 1e3
+        out["panel_moment_kNm"] = kw["panel"] * gamma / 1e3
+    return out
+
+
+def continuum_estimates(cells=(0.1, 0.05, 0.025)):
+    """The beam model step by step towards the continuum strips (docs/portal_frame.md).
+
+    Shear areas: the web, d tw (the idealised W shape's energy-consistent shear area is within 1%
+    of it); joint panel: Krawinkler's K = G d_c t_w d_b. The last rows use, per cell size, the
+    shear areas and the column-web thickness of the strips pmpm generates (their A/I scaling
+    thins the web when few particle rows cross the depth)."""
+    bm = _beam_module()
+    if bm is None:
+        raise RuntimeError("tests/verification/frame_beam_model.py not found")
+    props = bm.portal_frame_properties()
+    col, beam = props["column"], props["beam"]
+    g_mod = bm.E_STEEL / (2 * (1 + bm.NU_STEEL))
+    web_c, web_b = col["d"] * col["tw"], beam["d"] * beam["tw"]
+    panel = g_mod * col["d"] * col["tw"] * beam["d"]
+    sections = {"G_Pa": g_mod, "column_d_tw_m2": web_c, "beam_d_tw_m2": web_b,
+                "column_shear_area_m2": section_shear_area(col), "beam_shear_area_m2": section_shear_area(beam),
+                "panel_stiffness_Nm_per_rad": panel, "beam_end_stiffness_6EI_L": 6 * bm.E_STEEL * beam["I"] / bm.SPAN,
+                "column_shear_hand_mm": 0.5 * bm.LOAD * bm.HEIGHT / (g_mod * web_c) * 1e3}
+    cases = [
+        ("Euler-Bernoulli, centre lines", dict(geometry="centreline", stub_mass=False)),
+        ("Euler-Bernoulli, centre lines, stub mass", dict(geometry="centreline")),
+        ("Euler-Bernoulli, clear span (rigid offsets)", dict(stub_mass=False)),
+        ("Euler-Bernoulli, clear span, stub mass", dict()),
+        ("  + column shear (Timoshenko, d tw)", dict(column_shear=web_c)),
+        ("  + beam shear (Timoshenko, d tw)", dict(beam_shear=web_b)),
+        ("  + joint panel (G d_c t_w d_b)", dict(panel=panel)),
+        ("  + all three", dict(column_shear=web_c, beam_shear=web_b, panel=panel)),
+        ("  + all three, rigid panel doubled (stiffened joint)", dict(column_shear=web_c, beam_shear=web_b,
+                                                                       panel=2 * panel)),
+        ("centre lines, stub mass + all three", dict(geometry="centreline", column_shear=web_c,
+                                                     beam_shear=web_b, panel=panel)),
+    ]
+    strips = {}
+    for h in cells:
+        rows_c, t_c, geo_c = strip_profile(h, "left column")
+        rows_b, t_b, geo_b = strip_profile(h, "beam")
+        a_c = shear_area(rows_c, t_c, geo_c["depth"])
+        a_b = shear_area(rows_b, t_b, geo_b["depth"])
+        tw_c = float(t_c.min())
+        strips[h] = {"column_rows": len(rows_c), "beam_rows": len(rows_b),
+                     "column_web_over_tw": tw_c / col["tw"], "beam_web_over_tw": float(t_b.min()) / beam["tw"],
+                     "column_shear_area_m2": a_c, "beam_shear_area_m2": a_b}
+        cases.append((f"clear span, stub mass, strips of h = {h:g} m (their A_s and web)",
+                      dict(column_shear=a_c, beam_shear=a_b, panel=g_mod * col["d"] * tw_c * beam["d"])))
+    rows = []
+    for name, kw in cases:
+        r = frame_estimate(**kw)
+        r["model"] = name
+        rows.append(r)
+    return {"sections": sections, "strips": strips, "models": rows}
+
+
+def estimates_table(est):
+    """:func:`continuum_estimates` as Markdown."""
+    lines = ["| model | k (MN/m) | static (mm) | step peak (mm) | at (s) | period (ms) | mode 1 (ms) | panel rotation (mrad) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in est["models"]:
+        gamma = f"{r['panel_rotation_mrad']:.2f}" if "panel_rotation_mrad" in r else ""
+        lines.append(f"| {r['model']} | {r['k_N_per_m'] / 1e6:.2f} | {r['static_mm']:.2f} | {r['peak_mm']:.2f} "
+                     f"| {r['t_peak_s']:.4f} | {r['period_ms']:.1f} | {r['mode1_ms']:.1f} | {gamma} |")
+    lines.append("")
+    lines.append("| cell (m) | rows across column / beam | web thickness / tw, column / beam | shear area column / beam (m^2) |")
+    lines.append("|---|---|---|---|")
+    for h, s in est["strips"].items():
+        lines.append(f"| {h:g} | {s['column_rows']} / {s['beam_rows']} | {s['column_web_over_tw']:.2f} / "
+                     f"{s['beam_web_over_tw']:.2f} | {s['column_shear_area_m2']:.3e} / {s['beam_shear_area_m2']:.3e} |")
+    sec = est["sections"]
+    lines.append("")
+    lines.append(f"G = {sec['G_Pa'] / 1e9:.1f} GPa; web areas d tw: column {sec['column_d_tw_m2']:.3e}, beam "
+                 f"{sec['beam_d_tw_m2']:.3e} m^2 (energy shear areas of the idealised shapes {sec['column_shear_area_m2']:.3e}, "
+                 f"{sec['beam_shear_area_m2']:.3e}); panel G d_c t_w d_b = {sec['panel_stiffness_Nm_per_rad']:.3e} N m/rad "
+                 f"against the beam end's 6 E I_b / L = {sec['beam_end_stiffness_6EI_L']:.3e}; hand estimate of column "
+                 f"shear sway (P/2) h / (G d tw) = {sec['column_shear_hand_mm']:.2f} mm static")
+    return "\n".join(lines)
 
 
 def sway_extrema(t, u, t_peak):
@@ -305,7 +537,14 @@ def main(argv=None):
     ap.add_argument("--out", default="docs/portal_frame_resolution.json", help="JSON file to write")
     ap.add_argument("--histories", default=None, help="also save the sampled histories (.npz)")
     ap.add_argument("--no-reference", action="store_true", help="skip the beam-model reference")
+    ap.add_argument("--estimates", action="store_true",
+                    help="print only the beam-model estimates of the continuum effects (no MPM run, nothing written)")
     args = ap.parse_args(argv)
+    if args.estimates:
+        est = continuum_estimates(args.cells)
+        print(estimates_table(est))
+        print(json.dumps(est, separators=(",", ":"), default=float))
+        return 0
     from mpi4py import MPI
     if MPI.COMM_WORLD.size > 1:
         ap.error("runs on one rank (every rank would repeat the whole study); start it without mpirun -n > 1")

@@ -8,8 +8,10 @@ with every process still carrying this cluster's SLURM_CONF in its environment.
 
 Tests: the weak-scaling sweep (jobs/slurm_scaling_weak.sh, 1 and 2 ranks, tiny) gathered by
 jobs/gather_scaling.py; jobs/slurm_run.sh running a tiny scene, continuing it from its
-checkpoint after the end time grows, skipping it when complete, and passing pmpm's exit code.
-Runtime: about a minute here (2 vCPUs).
+checkpoint after the end time grows, skipping it when complete, and passing pmpm's exit code;
+a running job requeued with `scontrol requeue` continuing from its checkpoint.
+Runtime: 1-2 minutes here (2 vCPUs), after a first install of about 15 s.
+Run alone:  python -m pytest -q tests/slurm   (in the checkout's .venv, as root)
 """
 from __future__ import annotations
 
@@ -342,8 +344,10 @@ def cluster(tmp_path_factory):
         c.start()
         yield c
     finally:
-        left = c.stop()
-        shutil.rmtree(root, ignore_errors=True)
+        try:
+            left = c.stop()
+        finally:
+            shutil.rmtree(root, ignore_errors=True)
         assert not left, f"processes of the test cluster still running after the shutdown: {left}"
 
 

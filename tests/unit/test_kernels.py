@@ -115,3 +115,17 @@ def test_cell_order_sorts_by_cell_and_is_a_permutation():
     cells = np.floor((p["x"][order] - ORIGIN) / H).astype(int)
     key = cells[:, 0] * CELLS[1] + cells[:, 1]
     assert np.all(np.diff(key) >= 0)
+
+
+def test_reorder_in_place_equals_fancy_indexing():
+    from pmpm.particles import Particles
+    rng = np.random.default_rng(3)
+    n = 257
+    fields = {"id": np.arange(n, dtype=np.int64), "x": rng.normal(size=(n, 2)),
+              "stress": rng.normal(size=(n, 4)), "mat": rng.integers(0, 3, n).astype(np.int32)}
+    order = rng.permutation(n)
+    expected = {k: v[order].copy() for k, v in fields.items()}
+    p = Particles({k: v.copy() for k, v in fields.items()})
+    p.reorder(order)
+    for k in fields:
+        np.testing.assert_array_equal(p[k], expected[k])
