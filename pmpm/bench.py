@@ -187,12 +187,17 @@ def add_bench_parser(sub):
     s.add_argument("--particles", type=int, default=1_000_000)
     s.add_argument("--steps", type=int, default=20)
     s.add_argument("--repeat", type=int, default=3)
+    from .accuracy import add_arguments
+    add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 
 
 def main(args):
     """Dispatch ``pmpm bench <name>``."""
     if args.bench == "throughput":
         return throughput(args)
+    if args.bench == "accuracy":
+        from .accuracy import accuracy
+        return accuracy(args)
     if args.bench == "effects":
         return effects(args)
     from .scaling import scaling

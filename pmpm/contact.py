@@ -27,6 +27,8 @@ fields, mass gradient included, go through the same halo accumulate/fill as the 
 Without ``[contact]`` none of this is imported or run.
 """
 import logging
+import os
+PRE = os.environ.get('PRE') == '1'
 
 import numpy as np
 
@@ -134,15 +136,17 @@ class ContactSolver(Solver):
         finally:
             w.G = G
 
-    def _contact(self, vf, dvf):
+    def _contact(self, vf, dvf, momentum=False):
         w = self.window
         if self.n_slots > 1:
-            KC.contact_update(self.B, vf, dvf, self.mass_cutoff, self.friction, w.bc_mask,
+            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, w.bc_mask,
                               0, w.shape[0], 0, w.shape[1])
 
     def update_grid(self, dt):
         """Each slot's momentum update with its BCs, then the contact correction of the new
         velocities and (the same change) of the velocity changes FLIP adds to the particles."""
+        if PRE:
+            self._contact(KC.MOM, -1, True)
         self._per_slot(super().update_grid, dt)
         self._contact(KC.MOM, KC.FORCE)
 

@@ -79,7 +79,9 @@ class Particles:
     def reorder(self, order):
         """Permute every field in place (``order`` is a permutation of 0..n-1), without a second
         copy of any field: the particle arrays are most of a run's memory."""
-        from .kernels import permute_rows
+        from .kernels import is_identity, permute_rows
+        if is_identity(order):  # the usual case in solids: nobody changed cell since the last sort
+            return
         visited = np.empty(self.n, dtype=np.bool_)
         for k, a in self.fields.items():
             a = np.ascontiguousarray(a)

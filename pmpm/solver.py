@@ -171,8 +171,9 @@ class Solver:
     def grid_to_particles(self, remap):
         """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
         p = self.particles
+        self._dx = self._scratch("_dx_buf", (p.n, 2))
         vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
-                                   *self._geometry(), remap)
+                                   *self._geometry(), remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
 
     def update_strain(self, dt, velocity_field, move=True):
@@ -183,7 +184,7 @@ class Solver:
         self._de, self._dw = de, dw
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p["strain"], de, dw, velocity_field, move, dt,
+            p["x"], p["m"], p["vol"], p["strain"], de, dw, velocity_field, self._dx if move else None, dt,
             gravity, load_id, load_w, load_vec, *self._geometry())
 
     def move_particles(self, dt):
@@ -191,7 +192,7 @@ class Solver:
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p["strain"], None, None, 1, True, dt,
+            p["x"], p["m"], p["vol"], p["strain"], None, None, 1, self._dx, dt,
             gravity, load_id, load_w, load_vec, *self._geometry())
 
     def update_stress(self):
@@ -280,6 +281,7 @@ class Solver:
         remaining = cfg.end_time - self.t
         if 0 < remaining < dt:  # land on the end time exactly
             dt = remaining
+        self._dt_step = dt
         self.scheme.advance(self, dt)
         bad, outside, leaving = self._check_and_next_dt()
         if bad:

@@ -14,7 +14,7 @@ from .grid_ops import (elastic_energy, grid_update, kinetic_energy, momentum_to_
                        stress_power)
 from .transfer import p2g, g2p_velocity, g2p_kinematics
 from .objective import jaumann_rotate
-from .sort import cell_order, permute_rows
+from .sort import cell_order, is_identity, permute_rows
 from .locate import count_strays, cell_columns
 
 __all__ = ["p2g", "g2p_velocity", "stress_power", "kinetic_energy", "elastic_energy", "g2p_kinematics", "grid_update", "momentum_to_velocity",

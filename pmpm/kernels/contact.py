@@ -26,10 +26,10 @@ from ..shape import weights
 from .transfer import _external_force
 
 __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
-           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "REMAP"]
+           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "OFFSET", "REMAP"]
 
-N_BODY_FIELDS = 9
-MASS, MOM, FORCE, GRAD, REMAP = 0, 1, 3, 5, 7
+N_BODY_FIELDS = 11
+MASS, MOM, FORCE, GRAD, OFFSET, REMAP = 0, 1, 3, 5, 7, 9
 
 #: a pair normal shorter than this (the two unit mass gradients nearly parallel, not opposed)
 #: gives no direction: the node is left uncorrected
@@ -53,6 +53,8 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
             mvx = mp * v[p, 0]
             mvy = mp * v[p, 1]
             mg = mp * inv_h
+            ox_ = sx - i0  # offset from the first support node, cell units
+            oy_ = sy - j0
         fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
         if stress is not None:
             a = -vol[p] * inv_h
@@ -72,6 +74,8 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
                     B[ii, jj, s, 2] += w * mvy
                     B[ii, jj, s, 5] += mg * dnx
                     B[ii, jj, s, 6] += mg * dny
+                    B[ii, jj, s, 7] += w * mp * (ox_ - a_)
+                    B[ii, jj, s, 8] += w * mp * (oy_ - b_)
                 if with_force:
                     fnx = w * fx
                     fny = w * fy
@@ -91,7 +95,7 @@ def _unit(x, y):
 
 
 @nb.njit(cache=True, inline="always")
-def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
+def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
     """The contact correction at node (i, j); see :func:`contact_update`."""
     ns = B.shape[2]
     count = 0
@@ -103,8 +107,12 @@ def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
         if ms > mass_cutoff:
             count += 1
             mtot += ms
-            px += ms * B[i, j, s, vf]
-            py += ms * B[i, j, s, vf + 1]
+            if momentum:
+                px += B[i, j, s, vf]
+                py += B[i, j, s, vf + 1]
+            else:
+                px += ms * B[i, j, s, vf]
+                py += ms * B[i, j, s, vf + 1]
     if count < 2:
         return 0
     vcx = px / mtot
@@ -130,8 +138,13 @@ def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
             continue
         nx /= nn
         ny /= nn
-        dx = B[i, j, b, vf] - vcx
-        dy = B[i, j, b, vf + 1] - vcy
+        vx = B[i, j, b, vf]
+        vy = B[i, j, b, vf + 1]
+        if momentum:
+            vx /= B[i, j, b, 0]
+            vy /= B[i, j, b, 0]
+        dx = vx - vcx
+        dy = vy - vcy
         dn = dx * nx + dy * ny
         if dn > 0.0:  # approaching
             tx = dx - dn * nx
@@ -147,8 +160,12 @@ def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
                 cx = 0.0
             if fix_y:
                 cy = 0.0
-            B[i, j, b, vf] += cx
-            B[i, j, b, vf + 1] += cy
+            if momentum:
+                B[i, j, b, vf] += B[i, j, b, 0] * cx
+                B[i, j, b, vf + 1] += B[i, j, b, 0] * cy
+            else:
+                B[i, j, b, vf] += cx
+                B[i, j, b, vf + 1] += cy
             if dvf >= 0:
                 B[i, j, b, dvf] += cx
                 B[i, j, b, dvf + 1] += cy
@@ -157,7 +174,7 @@ def _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask):
 
 
 @nb.njit(cache=True)
-def contact_update(B, vf, dvf, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi):
+def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi):
     """Contact correction of the slot velocities in fields ``vf, vf + 1`` (and, if ``dvf`` >= 0,
     the same change of the velocity changes in ``dvf, dvf + 1``) over window rows [i_lo, i_hi)
     x [j_lo, j_hi); the velocities already obey the BCs, and constrained components are left
@@ -177,7 +194,7 @@ def contact_update(B, vf, dvf, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi)
     n = 0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
-            n += _contact_node(B, i, j, vf, dvf, mass_cutoff, mu, bc_mask)
+            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask)
     return n
 
 
@@ -185,7 +202,7 @@ def contact_update(B, vf, dvf, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi)
 def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, ncx, ncy, shape,
                         remap):
     """:func:`pmpm.kernels.transfer.g2p_velocity` from each particle's own slot; the MUSL
-    re-map (``remap``) goes into fields 7, 8 of that slot. Returns the largest speed and the
+    re-map (``remap``) goes into fields 9, 10 of that slot. Returns the largest speed and the
     number of non-finite velocities."""
     vmax2 = 0.0
     bad = 0
@@ -226,8 +243,8 @@ def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, n
                 for b_ in range(len(wy)):
                     jj = j0 + b_ - oy
                     w = wx[a_] * wy[b_]
-                    B[ii, jj, s, 7] += w * mvx
-                    B[ii, jj, s, 8] += w * mvy
+                    B[ii, jj, s, 9] += w * mvx
+                    B[ii, jj, s, 10] += w * mvy
     return vmax2 ** 0.5, bad
 
 

@@ -2,7 +2,7 @@
 import numba as nb
 import numpy as np
 
-__all__ = ["cell_order", "permute_rows"]
+__all__ = ["cell_order", "permute_rows", "is_identity"]
 
 
 @nb.njit(cache=True)
@@ -36,6 +36,15 @@ def cell_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
 
 
 @nb.njit(cache=True)
+def is_identity(order):
+    """True when ``order`` leaves every row where it is."""
+    for i in range(order.shape[0]):
+        if order[i] != i:
+            return False
+    return True
+
+
+@nb.njit(cache=True)
 def permute_rows(a, order, visited):
     """In place ``a[:] = a[order]`` for a 2-D byte view of a field, by following the cycles of
     the permutation: one row of scratch instead of a second copy of the field."""
@@ -43,7 +52,7 @@ def permute_rows(a, order, visited):
     visited[:] = False
     tmp = np.empty(a.shape[1], dtype=a.dtype)
     for start in range(n):
-        if visited[start]:
+        if visited[start] or order[start] == start:  # fixed points: most rows between sorts
             continue
         tmp[:] = a[start]
         i = start

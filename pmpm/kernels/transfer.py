@@ -71,9 +71,11 @@ def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
 
 
 @nb.njit(cache=True)
-def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap):
+def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
     """Update particle velocities from the grid (FLIP with a PIC blend, paper eq. 5) and, when
     ``remap`` is True, scatter the new particle momentum into fields 5, 6 (MUSL, paper eq. 6).
+    ``dx`` (N, 2) receives each particle's move dt sum N_i v_i (eq. 5); it is applied later,
+    after the strain increment, so every transfer of the step uses the same weights.
 
     Returns the largest particle speed (for the next CFL time step) and the number of
     particles whose new velocity is not finite."""
@@ -98,6 +100,8 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap)
                 vy += w * G[ii, jj, 2]
                 dvx += w * G[ii, jj, 3]
                 dvy += w * G[ii, jj, 4]
+        dx[p, 0] = dt * vx
+        dx[p, 1] = dt * vy
         nvx = flip * (v[p, 0] + dvx) + pic * vx
         nvy = flip * (v[p, 1] + dvy) + pic * vy
         v[p, 0] = nvx
@@ -121,11 +125,11 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap)
 
 
 @nb.njit(cache=True)
-def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, move, dt,
+def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
                    gravity, load_id, load_w, load_vec,
                    G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Strain increment from the grid velocity in ``vel_field`` (paper eq. 6), volume update,
-    and (``move``) position update x += dt sum N v_i with the updated grid velocity (eq. 5).
+    and (``dx`` not None) the position update x += dx computed by g2p_velocity (eq. 5).
 
     ``de`` (N, 3) receives the strain increment when not None (``strain`` and ``vol`` are
     updated with it); ``dw`` (N,) the spin increment when not None (objective stress rate).
@@ -140,8 +144,6 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, move, dt,
         lxy = 0.0
         lyx = 0.0
         lyy = 0.0
-        ux = 0.0
-        uy = 0.0
         for a_ in range(len(wx)):
             ii = i0 + a_ - ox
             for b_ in range(len(wy)):
@@ -155,10 +157,6 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, move, dt,
                     lxy += gvx * dny
                     lyx += gvy * dnx
                     lyy += gvy * dny
-                if move:
-                    w = wx[a_] * wy[b_]
-                    ux += w * G[ii, jj, 1]
-                    uy += w * G[ii, jj, 2]
         if de is not None:
             c = dt * inv_h
             dexx = c * lxx
@@ -173,9 +171,9 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, move, dt,
             strain[p, 1] += deyy
             strain[p, 2] += dgxy
             vol[p] *= 1.0 + dexx + deyy
-        if move:
-            ux *= dt
-            uy *= dt
+        if dx is not None:
+            ux = dx[p, 0]
+            uy = dx[p, 1]
             x[p, 0] += ux
             x[p, 1] += uy
             fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)

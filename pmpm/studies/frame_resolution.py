@@ -358,7 +358,7 @@ def continuum_estimates(cells=(0.1, 0.05, 0.025)):
         ("  + beam shear (Timoshenko, d tw)", dict(beam_shear=web_b)),
         ("  + joint panel (G d_c t_w d_b)", dict(panel=panel)),
         ("  + all three", dict(column_shear=web_c, beam_shear=web_b, panel=panel)),
-        ("  + all three, rigid panel doubled (stiffened joint)", dict(column_shear=web_c, beam_shear=web_b,
+        ("  + all three, panel stiffness doubled (stiffened joint)", dict(column_shear=web_c, beam_shear=web_b,
                                                                        panel=2 * panel)),
         ("centre lines, stub mass + all three", dict(geometry="centreline", column_shear=web_c,
                                                      beam_shear=web_b, panel=panel)),

@@ -123,12 +123,20 @@ def _die_with_parent():
         pass
 
 
-def _environ_has(pid, needle):
+def _environ(pid):
     try:
         with open(f"/proc/{pid}/environ", "rb") as fh:
-            return needle in fh.read().split(b"\0")
+            return set(fh.read().split(b"\0"))
     except OSError:
-        return False
+        return set()
+
+
+def _comm(pid):
+    try:
+        with open(f"/proc/{pid}/comm", "rb") as fh:
+            return fh.read().strip().decode(errors="replace")
+    except OSError:
+        return ""
 
 
 def _cmdline(pid):
@@ -326,11 +334,16 @@ PartitionName=test Nodes={self.node} Default=YES MaxTime=30 State=UP
         return left
 
     def leftovers(self):
-        """Pids of processes started under this cluster (slurmstepd, job scripts, ranks)."""
+        """Pids of processes started under this cluster: its daemons and step daemons, and the
+        processes of its jobs (job scripts, mpirun, ranks), all carrying this cluster's SLURM_CONF."""
         me = os.getpid()
+        jobs = {f"SLURM_JOB_ID={j}".encode() for j in self.jobs}
         pids = []
         for entry in os.listdir("/proc"):
-            if entry.isdigit() and int(entry) != me and _environ_has(entry, self.marker):
+            if not entry.isdigit() or int(entry) == me:
+                continue
+            env = _environ(entry)
+            if self.marker in env and (env & jobs or _comm(entry) in ("slurmstepd", "slurmd", "slurmctld", "munged")):
                 pids.append(int(entry))
         return pids
 

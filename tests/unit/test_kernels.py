@@ -66,11 +66,14 @@ def test_g2p_velocity_matches_reference(name, pic):
     G[..., 1:5] = rng.normal(size=G[..., 1:5].shape)
     vel, dvel = G[..., 1:3].copy(), G[..., 3:5].copy()
     v = p["v"].copy()
+    dx = np.empty_like(v)
     vmax, bad = K.g2p_velocity(p["x"], p["m"], v, pic, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1],
-                               SHAPE_TAGS[name], True)
+                               SHAPE_TAGS[name], True, dx, 0.5)
     ref = g2p_velocity_reference(ORDER[name], p["x"], p["v"], vel, dvel, pic, ORIGIN, H, CELLS)
     np.testing.assert_allclose(v, ref, rtol=1e-12, atol=1e-12)
     assert vmax == pytest.approx(np.sqrt((ref ** 2).sum(1)).max(), rel=1e-12) and bad == 0
+    pic_only = g2p_velocity_reference(ORDER[name], p["x"], p["v"], vel, dvel, 1.0, ORIGIN, H, CELLS)
+    np.testing.assert_allclose(dx, 0.5 * pic_only, rtol=1e-12, atol=1e-12)  # the move, eq. 5
     # the MUSL re-map scattered the new momenta: total momentum is conserved exactly
     np.testing.assert_allclose(G[..., 5:7].sum(axis=(0, 1)), (p["m"][:, None] * v).sum(0), rtol=1e-12)
 
