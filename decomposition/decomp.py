@@ -413,10 +413,11 @@ class SlabDecomposition:
 
     # -------------------------------------------------------------- counters
     def reset_counters(self):
-        """Zero ``bytes_sent``, ``messages_sent`` and ``comm_time``."""
+        """Zero ``bytes_sent``, ``messages_sent``, ``comm_time`` and ``comm_cpu``."""
         self.bytes_sent = {"halo": 0, "migration": 0}
         self.messages_sent = {"halo": 0, "migration": 0}
         self.comm_time = 0.0
+        self.comm_cpu = 0.0
 
     def _count(self, kind, nbytes):
         """Record one sent message of ``nbytes`` bytes under ``kind``."""
@@ -425,12 +426,14 @@ class SlabDecomposition:
 
     @contextmanager
     def _timed(self):
-        """Add the wall time of the block to ``comm_time``."""
-        start = time.perf_counter()
+        """Add the wall time of the block to ``comm_time`` and its CPU time to ``comm_cpu``
+        (Open MPI polls while it waits, so waiting costs CPU time too)."""
+        start, cpu = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
             self.comm_time += time.perf_counter() - start
+            self.comm_cpu += time.process_time() - cpu
 
     def __repr__(self):
         return (f"SlabDecomposition(rank={self.rank}/{self.size}, axis={self.axis}, "

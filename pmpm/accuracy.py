@@ -344,9 +344,11 @@ def equal_time_comparison(rows, problem="frame", a="cubic", b="linear", n=9):
     times = np.geomspace(lo, hi, n)
     ea = [_loglog_interp(sa, t) for t in times]
     eb = [_loglog_interp(sb, t) for t in times]
+    ok = [x <= y for x, y in zip(ea, eb)]
+    since = next((t for k, t in enumerate(times) if all(ok[k:])), None)
     return {"problem": problem, "shapes": [a, b], "overlap_s": [lo, hi], "times_s": times.tolist(),
             f"error_{a}": ea, f"error_{b}": eb, "ratio": [x / y for x, y in zip(ea, eb)],
-            "holds": all(x <= y for x, y in zip(ea, eb))}
+            "holds": all(ok), "holds_from_s": None if since is None else float(since)}
 
 
 def recommendations(rows, targets=TARGETS):
@@ -425,7 +427,8 @@ def markdown_table(rows):
 
 def write_markdown(rows, summary, path):
     lines = ["# pmpm bench accuracy", "", f"Command: `{summary['command']}`", "",
-             f"Study wall time: {summary['study_wall_s']:.0f} s", ""]
+             "Study wall time: " + (f"{summary['study_wall_s']:.0f} s" if summary["study_wall_s"] is not None
+                                    else "(re-analysis of an earlier accuracy.csv)"), ""]
     lines.append("## Convergence order (bar, MUSL, 2 x 2 particles per cell)")
     lines.append("")
     for shape, o in summary["orders"].items():
@@ -514,17 +517,47 @@ def add_arguments(p):
     """Options of ``pmpm bench accuracy``."""
     p.add_argument("--quick", action="store_true", help="reduced sweep (about two minutes)")
     p.add_argument("--outdir", default="accuracy_results", help="directory for accuracy.csv/.md/.png")
+    p.add_argument("--from-csv", metavar="CSV", default=None,
+                   help="run nothing: redo the analysis and the files from an earlier accuracy.csv")
 
 
-def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None):
+def read_csv(path):
+    """Rows of an earlier accuracy.csv, typed as the sweep makes them."""
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            row = {"problem": r["problem"], "shape": r["shape"], "ppc": int(r["ppc"]), "scheme": r["scheme"],
+                   "cell_size": float(r["cell_size"]), "status": r["status"]}
+            for k in ("particles", "steps"):
+                if r[k]:
+                    row[k] = int(r[k])
+            for k in ("wall_s", "cpu_s", "error", "peak_mm", "t_peak_s", "peak_track_mm"):
+                if r[k]:
+                    row[k] = float(r[k])
+            if row["status"] == "reference":
+                row["status"] = "ok"
+            if row["problem"] == "frame":
+                row.pop("error", None)
+            rows.append(row)
+    return rows
+
+
+def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None, from_csv=None):
     """Run the sweep, write the files, print the figures; returns the summary dict (the JSON)."""
-    from .errors import ConfigError, ParticleExitError, UnstableRunError
     t_study = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
-    runs = plan(quick)
+    csv_path = os.path.join(outdir, "accuracy.csv")
+    if from_csv:
+        rows = read_csv(from_csv)
+    else:
+        rows = _sweep(plan(quick), csv_path, log)
+    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command)
+
+
+def _sweep(runs, csv_path, log):
+    from .errors import ConfigError, ParticleExitError, UnstableRunError
     warm_up({(r[0], r[1], r[3]) for r in runs}, log)
     rows = []
-    csv_path = os.path.join(outdir, "accuracy.csv")
     for k, (problem, shape, ppc, scheme, h) in enumerate(runs):
         try:
             if problem == "bar":
@@ -541,15 +574,21 @@ def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout
         what = (f"error {row['error']:.3g}" if row.get("error") is not None else
                 f"peak {row['peak_mm']:.3f} mm at {row['t_peak_s']:.4f} s" if row.get("peak_mm") is not None
                 else row["status"])
-        print(f"[accuracy] {k + 1}/{len(runs)} {problem} {shape} ppc {ppc} {scheme} h {h:.4g}: "
-              f"{what}, wall {_fmt(row.get('wall_s'), '.2f')} s, {row.get('steps', '')} steps", file=log, flush=True)
+        cost = f", wall {row['wall_s']:.2f} s, {row['steps']} steps" if row.get("wall_s") is not None else ""
+        print(f"[accuracy] {k + 1}/{len(runs)} {problem} {shape} ppc {ppc} {scheme} h {h:.4g}: {what}{cost}",
+              file=log, flush=True)
         write_csv(rows, csv_path)   # a stopped study keeps what it finished
+    return rows
+
+
+def _report(rows, quick, outdir, csv_path, t_study, out, command):
     ref = attach_frame_errors(rows)
     pareto_front(rows)
     orders = convergence_orders(rows, "bar")
     summary = {
         "command": command or "pmpm bench accuracy" + (" --quick" if quick else "") + f" --outdir {outdir}",
-        "quick": quick, "study_wall_s": time.perf_counter() - t_study, "runs": len(rows),
+        "quick": quick, "study_wall_s": None if t_study is None else time.perf_counter() - t_study,
+        "runs": len(rows),
         "orders": orders, "frame_orders": convergence_orders(rows, "frame") if ref else {},
         "equal_time": equal_time_comparison(rows, "frame") if ref else None,
         "equal_time_bar": equal_time_comparison(rows, "bar"),
@@ -574,14 +613,17 @@ def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout
         if c and c.get("overlap_s"):
             print(f"cubic vs linear at equal wall time ({c['problem']}, {c['overlap_s'][0]:.2f}-{c['overlap_s'][1]:.2f} s): "
                   f"error ratio cubic/linear {min(c['ratio']):.2f}-{max(c['ratio']):.2f}, "
-                  f"cubic at least as accurate: {c['holds']}", file=out)
+                  f"cubic at least as accurate: {c['holds']}"
+                  + ("" if c["holds"] or c["holds_from_s"] is None else f" (from {c['holds_from_s']:.2f} s on)"),
+                  file=out)
     for key, r in summary["recommendations"].items():
         if r is None:
             print(f"{float(key):.1%} on the frame's first peak: no run below the reference reaches it", file=out)
         else:
             print(f"{float(key):.1%} on the frame's first peak: {r['shape']}, {r['ppc']}x{r['ppc']} ppc, "
                   f"{r['scheme'].upper()}, h = {r['cell_size']:g} m ({r['error']:.2%}, {r['wall_s']:.1f} s)", file=out)
-    print(f"study wall time {summary['study_wall_s']:.0f} s; wrote {', '.join(summary['files'].values())}", file=out)
+    took = "" if summary["study_wall_s"] is None else f"study wall time {summary['study_wall_s']:.0f} s; "
+    print(f"{took}wrote {', '.join(summary['files'].values())}", file=out)
     print(json.dumps(_jsonable(summary), separators=(",", ":")), file=out)
     out.flush()
     return summary
@@ -605,6 +647,6 @@ def accuracy(args):
     if MPI.COMM_WORLD.size > 1:
         print("pmpm bench accuracy runs on one rank (start it without mpirun -n > 1)", file=sys.stderr)
         return 2
-    study(args.quick, args.outdir, command="pmpm bench accuracy " + " ".join(sys.argv[3:]) if
-          sys.argv[1:3] == ["bench", "accuracy"] else None)
+    command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip() if sys.argv[1:3] == ["bench", "accuracy"] else None
+    study(args.quick, args.outdir, command=command, from_csv=args.from_csv)
     return 0

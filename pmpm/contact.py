@@ -41,6 +41,7 @@ logger = logging.getLogger(__name__)
 #: single-field layout (pmpm.kernels) where the body layout inserts the mass gradient
 _FIRST_SHIFTED = 5
 _SHIFT = KC.REMAP - 5
+SEP = float(os.environ.get("SEP", "1e300"))
 
 
 def contact_slots(scene):
@@ -102,10 +103,10 @@ class ContactSolver(Solver):
         a2 = _field(a)
         b2 = b if b <= _FIRST_SHIFTED else b + _SHIFT
         if a == 0 and b2 == KC.GRAD:
-            return [self.B[..., a2:KC.GRAD + 2]]
+            return [self.B[..., a2:KC.REMAP]]
         views = [self.B[..., a2:b2]]
         if a == 0:
-            views.append(self.B[..., KC.GRAD:KC.GRAD + 2])
+            views.append(self.B[..., KC.GRAD:KC.REMAP])
         return views
 
     # -- the phases that differ -----------------------------------------------------------------
@@ -139,7 +140,7 @@ class ContactSolver(Solver):
     def _contact(self, vf, dvf, momentum=False):
         w = self.window
         if self.n_slots > 1:
-            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, w.bc_mask,
+            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, SEP, w.bc_mask,
                               0, w.shape[0], 0, w.shape[1])
 
     def update_grid(self, dt):

@@ -53,8 +53,8 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
             mvx = mp * v[p, 0]
             mvy = mp * v[p, 1]
             mg = mp * inv_h
-            ox_ = sx - i0  # offset from the first support node, cell units
-            oy_ = sy - j0
+            rx0 = sx - i0  # offset from the first support node, cell units
+            ry0 = sy - j0
         fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
         if stress is not None:
             a = -vol[p] * inv_h
@@ -74,8 +74,8 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
                     B[ii, jj, s, 2] += w * mvy
                     B[ii, jj, s, 5] += mg * dnx
                     B[ii, jj, s, 6] += mg * dny
-                    B[ii, jj, s, 7] += w * mp * (ox_ - a_)
-                    B[ii, jj, s, 8] += w * mp * (oy_ - b_)
+                    B[ii, jj, s, 7] += w * mp * (rx0 - a_)
+                    B[ii, jj, s, 8] += w * mp * (ry0 - b_)
                 if with_force:
                     fnx = w * fx
                     fny = w * fy
@@ -95,7 +95,7 @@ def _unit(x, y):
 
 
 @nb.njit(cache=True, inline="always")
-def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
+def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask):
     """The contact correction at node (i, j); see :func:`contact_update`."""
     ns = B.shape[2]
     count = 0
@@ -121,15 +121,24 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
     fix_y = bc_mask[i, j, 1] != 0
     corrected = 0
     for b in range(ns):
-        if not B[i, j, b, 0] > mass_cutoff:
+        mb = B[i, j, b, 0]
+        if not mb > mass_cutoff:
             continue
-        rx = 0.0  # sum of the other slots' unit mass gradients
+        # outward normal: own unit mass gradient minus the others' (a pair shares it)
+        rx = 0.0
         ry = 0.0
+        mo = 0.0  # the others' mass and mass-weighted offsets
+        cx_o = 0.0
+        cy_o = 0.0
         for c in range(ns):
-            if c != b and B[i, j, c, 0] > mass_cutoff:
+            mc = B[i, j, c, 0]
+            if c != b and mc > mass_cutoff:
                 ux, uy = _unit(B[i, j, c, GRAD], B[i, j, c, GRAD + 1])
                 rx += ux
                 ry += uy
+                mo += mc
+                cx_o += B[i, j, c, OFFSET]
+                cy_o += B[i, j, c, OFFSET + 1]
         ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
         nx = ux - rx
         ny = uy - ry
@@ -138,11 +147,17 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
             continue
         nx /= nn
         ny /= nn
+        # displacement check: the others' material centroid (as the node sees it) lies less
+        # than sep_max cells beyond this slot's along its normal
+        gap = ((cx_o / mo - B[i, j, b, OFFSET] / mb) * nx
+               + (cy_o / mo - B[i, j, b, OFFSET + 1] / mb) * ny)
+        if not gap < sep_max:
+            continue
         vx = B[i, j, b, vf]
         vy = B[i, j, b, vf + 1]
         if momentum:
-            vx /= B[i, j, b, 0]
-            vy /= B[i, j, b, 0]
+            vx /= mb
+            vy /= mb
         dx = vx - vcx
         dy = vy - vcy
         dn = dx * nx + dy * ny
@@ -161,8 +176,8 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
             if fix_y:
                 cy = 0.0
             if momentum:
-                B[i, j, b, vf] += B[i, j, b, 0] * cx
-                B[i, j, b, vf + 1] += B[i, j, b, 0] * cy
+                B[i, j, b, vf] += mb * cx
+                B[i, j, b, vf + 1] += mb * cy
             else:
                 B[i, j, b, vf] += cx
                 B[i, j, b, vf + 1] += cy
@@ -174,7 +189,7 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
 
 
 @nb.njit(cache=True)
-def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi):
+def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask, i_lo, i_hi, j_lo, j_hi):
     """Contact correction of the slot velocities in fields ``vf, vf + 1`` (and, if ``dvf`` >= 0,
     the same change of the velocity changes in ``dvf, dvf + 1``) over window rows [i_lo, i_hi)
     x [j_lo, j_hi); the velocities already obey the BCs, and constrained components are left
@@ -194,7 +209,7 @@ def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, bc_mask, i_lo, i_hi, j
     n = 0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
-            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask)
+            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask)
     return n
 
 
