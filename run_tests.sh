@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The whole test suite: serial tests, then the MPI tests under 2, 3 and 4 ranks.
-# Needs the set-up of ./setup.sh (the README's second command runs both).
+# The whole test suite: serial tests, then the MPI tests under 2, 3 and 4 ranks, then the
+# hard cases on 3 ranks. Needs the set-up of ./setup.sh (the README's second command runs both).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 . .venv/bin/activate
@@ -8,8 +8,15 @@ export PYTHONFAULTHANDLER=1
 # numba compiles each kernel once into its cache; warm it from one process so that the MPI
 # ranks started below do not race writing the same cache entries (design.md section 8)
 python -m pmpm.warmup
-python -m pytest -q tests/unit tests/verification tests/integration "$@"
+serial=(tests/unit tests/verification tests/integration)
+[ -d tests/hard ] && serial+=(tests/hard --ignore=tests/hard/mpi)
+[ -d tests/slurm ] && serial+=(tests/slurm)
+python -m pytest -q -p no:cacheprovider "${serial[@]}" "$@"
 for n in 2 3 4; do
     echo "== MPI tests on $n ranks =="
     mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q -p no:cacheprovider tests/mpi
 done
+if [ -d tests/hard/mpi ]; then
+    echo "== hard cases on 3 ranks =="
+    mpirun -n 3 --oversubscribe --bind-to none python -m pytest -q -p no:cacheprovider tests/hard/mpi
+fi

@@ -10,6 +10,7 @@ import resource
 import statistics
 import time
 
+import numba as nb
 import numpy as np
 
 __all__ = ["add_bench_parser", "main", "block_scene", "warm_kernels"]
@@ -64,10 +65,11 @@ def _rss_bytes():
 
 
 def _time_steps(solver, steps):
-    t0 = time.perf_counter()
+    """(wall s, process CPU s) of ``steps`` steps."""
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         solver.step()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def warm_kernels(verbose=False):
@@ -84,6 +86,43 @@ def warm_kernels(verbose=False):
                     print(f"warm: {shape} {scheme} loads={loads}")
 
 
+@nb.njit(cache=True)
+def _triad(a, b, c, scalar):
+    for i in range(a.shape[0]):
+        a[i] = b[i] + scalar * c[i]
+
+
+def stream_triad_bandwidth(n=20_000_000, repeat=7):
+    """Memory bandwidth of this core in bytes/s, STREAM-triad style (a = b + s c on arrays far
+    larger than the caches; 24 bytes per element counted, as STREAM does), best of ``repeat``."""
+    a, b, c = np.zeros(n), np.ones(n), np.full(n, 2.0)
+    _triad(a, b, c, 3.0)
+    best = math.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        _triad(a, b, c, 3.0)
+        best = min(best, time.perf_counter() - t0)
+    return 24 * n / best
+
+
+def step_bytes_per_particle(solver):
+    """Bytes the step must stream per particle: every particle array each phase reads or writes
+    (counted once per phase) plus the grid window's passes, per particle."""
+    p = solver.particles
+    size = {k: a.itemsize * (a.size // max(len(a), 1)) for k, a in p.fields.items()}
+    passes = [  # (read, written) particle fields per phase of the MUSL step
+        (("x", "m", "v", "vol", "stress"), ()),                               # particles_to_grid
+        (("x", "m", "v"), ("v",)),                                            # grid_to_particles
+        (("x", "m", "vol", "strain"), ("x", "vol", "strain")),                # update_strain
+        (("stress", "vol"), ("stress",)),                                     # update_stress
+    ]
+    scratch = 16 + 16 + 24 + 24 + 24  # dx written and read, de written and read twice
+    particle = sum(size[f] for r, w in passes for f in r + w) + scratch
+    grid_nodes = solver.window.G.shape[0] * solver.window.G.shape[1]
+    grid = grid_nodes * solver.window.G.shape[2] * 8 * 6 / p.n  # reset, scatter x2, update, velocity, gather
+    return particle + grid
+
+
 def throughput(args):
     """Particle-steps per second of one rank on an elastic (or plastic) block."""
     from mpi4py import MPI
@@ -98,19 +137,31 @@ def throughput(args):
         solver = Solver(block_scene(n, args.shape, args.scheme, args.material), MPI.COMM_SELF)
         solver.step()  # first-touch of the grid window and scratch arrays
         times = [_time_steps(solver, args.steps) for _ in range(args.repeat)]
-        med = statistics.median(times)
+        med = statistics.median(t[0] for t in times)
+        cpu = statistics.median(t[1] for t in times)
         n_real = solver.particles.n
         rate = n_real * args.steps / med
         mem = (_rss_bytes() - base) / n_real
         res = {"particles": n_real, "steps": args.steps, "repeats": args.repeat, "shape": args.shape,
                "scheme": args.scheme, "material": args.material, "median_s": med,
                "particle_steps_per_s": rate, "ns_per_particle_step": 1e9 / rate,
-               "bytes_per_particle": mem}
+               "cpu_particle_steps_per_s": n_real * args.steps / cpu,
+               "bytes_per_particle": mem, "bytes_moved_per_particle_step": step_bytes_per_particle(solver)}
         print(f"{n_real:>9d} particles  {args.steps} steps x {args.repeat}: median {med:.3f} s  "
-              f"{rate / 1e6:.2f} M particle-steps/s  {1e9 / rate:.1f} ns/particle-step  "
-              f"peak memory {mem:.0f} B/particle")
+              f"{rate / 1e6:.2f} M particle-steps/s  {1e9 / rate:.1f} ns/particle-step "
+              f"(CPU time: {res['cpu_particle_steps_per_s'] / 1e6:.2f} M/s)  peak memory {mem:.0f} B/particle")
         results.append(res)
         del solver
+    # last: its large arrays would otherwise set the peak-memory high-water mark
+    bandwidth = stream_triad_bandwidth()
+    print(f"memory bandwidth (STREAM triad, one core): {bandwidth / 1e9:.1f} GB/s")
+    for res in results:
+        floor_ns = res["bytes_moved_per_particle_step"] / bandwidth * 1e9
+        res.update(bandwidth_bytes_per_s=bandwidth, bandwidth_floor_ns=floor_ns,
+                   fraction_of_bandwidth_floor=floor_ns / res["ns_per_particle_step"])
+        print(f"{res['particles']:>9d} particles stream ~{res['bytes_moved_per_particle_step']:.0f} "
+              f"B/particle-step: bandwidth floor {floor_ns:.1f} ns, reached "
+              f"{100 * res['fraction_of_bandwidth_floor']:.0f}% of it")
     last = dict(results[-1])
     last["all"] = results
     print(json.dumps(last))
