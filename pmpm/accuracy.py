@@ -412,6 +412,18 @@ def write_csv(rows, path):
             w.writerow({k: r.get(k, "") if r.get(k) is not None else "" for k in CSV_COLUMNS})
 
 
+def _short_status(status):
+    """'refused: bodies[0].depth: 3 particle row(s) ...' -> 'refused (3 particle rows)', etc."""
+    import re
+    m = re.search(r"(\d+) particle row", status)
+    if status.startswith("refused") and m:
+        return f"refused ({m.group(1)} particle rows across a member)"
+    m = re.search(r"diverged at t = ([0-9.eE+-]+) s", status)
+    if m:
+        return f"diverged at t = {float(m.group(1)):.4f} s"
+    return status[:60]
+
+
 def markdown_table(rows):
     head = ("| problem | shape | ppc | scheme | cell (m) | particles | steps | wall (s) | CPU (s) "
             "| error | first peak (mm) | Pareto |")
@@ -420,7 +432,7 @@ def markdown_table(rows):
         if r["status"] == "reference":
             err = "reference"
         elif r.get("error") is None:
-            err = r["status"]
+            err = _short_status(r["status"])
         else:
             err = f"{r['error']:.3g}"
         lines.append(f"| {r['problem']} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:.4g} "
@@ -616,7 +628,8 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command):
     for name in ("equal_time", "equal_time_bar"):
         c = summary[name]
         if c and c.get("overlap_s"):
-            print(f"cubic vs linear at equal wall time ({c['problem']}, {c['overlap_s'][0]:.2f}-{c['overlap_s'][1]:.2f} s): "
+            lo, hi = c["overlap_s"]
+            print(f"cubic vs linear at equal wall time ({c['problem']}, {lo:.2f}-{hi:.2f} s): "
                   f"error ratio cubic/linear {min(c['ratio']):.2f}-{max(c['ratio']):.2f}, "
                   f"cubic at least as accurate: {c['holds']}"
                   + ("" if c["holds"] or c["holds_from_s"] is None else f" (from {c['holds_from_s']:.2f} s on)"),
@@ -652,6 +665,8 @@ def accuracy(args):
     if MPI.COMM_WORLD.size > 1:
         print("pmpm bench accuracy runs on one rank (start it without mpirun -n > 1)", file=sys.stderr)
         return 2
-    command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip() if sys.argv[1:3] == ["bench", "accuracy"] else None
+    command = None
+    if sys.argv[1:3] == ["bench", "accuracy"]:
+        command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()
     study(args.quick, args.outdir, command=command, from_csv=args.from_csv)
     return 0

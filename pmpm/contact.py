@@ -29,6 +29,7 @@ Without ``[contact]`` none of this is imported or run.
 import logging
 import os
 PRE = os.environ.get('PRE') == '1'
+FLAGS = os.environ.get('FLAGS') == '1'
 
 import numpy as np
 
@@ -137,10 +138,10 @@ class ContactSolver(Solver):
         finally:
             w.G = G
 
-    def _contact(self, vf, dvf, momentum=False):
+    def _contact(self, vf, dvf, momentum=False, flags=0):
         w = self.window
         if self.n_slots > 1:
-            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, SEP, w.bc_mask,
+            KC.contact_update(self.B, vf, dvf, momentum, flags, self.mass_cutoff, self.friction, SEP, w.bc_mask,
                               0, w.shape[0], 0, w.shape[1])
 
     def update_grid(self, dt):
@@ -149,13 +150,13 @@ class ContactSolver(Solver):
         if PRE:
             self._contact(KC.MOM, -1, True)
         self._per_slot(super().update_grid, dt)
-        self._contact(KC.MOM, KC.FORCE)
+        self._contact(KC.MOM, KC.FORCE, flags=1)
 
     def grid_velocity(self, source, target):
         """Each slot's v = (mv)/m with its BCs, then the contact correction (the interpolated
         velocity from which USF and MUSL take the strain increment)."""
         self._per_slot(super().grid_velocity, _field(source), _field(target))
-        self._contact(_field(target), -1)
+        self._contact(_field(target), -1, flags=2 if FLAGS and target == 5 else 0)
 
     def grid_to_particles(self, remap):
         p = self.particles

@@ -28,7 +28,8 @@ from .transfer import _external_force
 __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
            "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "OFFSET", "REMAP"]
 
-N_BODY_FIELDS = 11
+N_BODY_FIELDS = 12
+FLAG = 11
 MASS, MOM, FORCE, GRAD, OFFSET, REMAP = 0, 1, 3, 5, 7, 9
 
 #: a pair normal shorter than this (the two unit mass gradients nearly parallel, not opposed)
@@ -95,7 +96,7 @@ def _unit(x, y):
 
 
 @nb.njit(cache=True, inline="always")
-def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask):
+def _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask):
     """The contact correction at node (i, j); see :func:`contact_update`."""
     ns = B.shape[2]
     count = 0
@@ -161,6 +162,13 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask)
         dx = vx - vcx
         dy = vy - vcy
         dn = dx * nx + dy * ny
+        if flags == 1:
+            B[i, j, b, FLAG] = 0.0
+        force = flags == 2 and B[i, j, b, FLAG] != 0.0
+        if force and dn < 0.0:
+            dn = -dn
+            dx = -dx
+            dy = -dy
         if dn > 0.0:  # approaching
             tx = dx - dn * nx
             ty = dy - dn * ny
@@ -181,15 +189,20 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask)
             else:
                 B[i, j, b, vf] += cx
                 B[i, j, b, vf + 1] += cy
+            if force and ((vx - vcx) * nx + (vy - vcy) * ny) < 0.0:
+                cx = -cx
+                cy = -cy
             if dvf >= 0:
                 B[i, j, b, dvf] += cx
                 B[i, j, b, dvf + 1] += cy
+            if flags == 1:
+                B[i, j, b, FLAG] = 1.0
             corrected += 1
     return corrected
 
 
 @nb.njit(cache=True)
-def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask, i_lo, i_hi, j_lo, j_hi):
+def contact_update(B, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask, i_lo, i_hi, j_lo, j_hi):
     """Contact correction of the slot velocities in fields ``vf, vf + 1`` (and, if ``dvf`` >= 0,
     the same change of the velocity changes in ``dvf, dvf + 1``) over window rows [i_lo, i_hi)
     x [j_lo, j_hi); the velocities already obey the BCs, and constrained components are left
@@ -209,7 +222,7 @@ def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask, i_lo
     n = 0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
-            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, sep_max, bc_mask)
+            n += _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask)
     return n
 
 
