@@ -238,6 +238,8 @@ def add_bench_parser(sub):
     s.add_argument("--particles", type=int, default=1_000_000)
     s.add_argument("--steps", type=int, default=20)
     s.add_argument("--repeat", type=int, default=3)
+    s.add_argument("--ppc", type=int, default=2,
+                   help="particles per cell per direction (more particles on the same grid)")
     from .accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 

@@ -30,6 +30,7 @@ import logging
 import os
 PRE = os.environ.get('PRE') == '1'
 FLAGS = os.environ.get('FLAGS') == '1'
+LIM = float(os.environ.get('LIM', '0'))
 
 import numpy as np
 
@@ -42,7 +43,8 @@ logger = logging.getLogger(__name__)
 #: single-field layout (pmpm.kernels) where the body layout inserts the mass gradient
 _FIRST_SHIFTED = 5
 _SHIFT = KC.REMAP - 5
-SEP = float(os.environ.get("SEP", "1e300"))
+FILL = float(os.environ.get("FILL", "0"))
+RAW = int(os.environ.get("RAW", "0"))
 
 
 def contact_slots(scene):
@@ -117,7 +119,7 @@ class ContactSolver(Solver):
     def particles_to_grid(self, momentum, forces):
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
-        KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
+        KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["vol"],
                       p["stress"] if forces else None, p["body"], self.slot_of,
                       gravity, load_id, load_w, load_vec, *self._body_geometry())
 
@@ -138,11 +140,11 @@ class ContactSolver(Solver):
         finally:
             w.G = G
 
-    def _contact(self, vf, dvf, momentum=False, flags=0):
+    def _contact(self, vf, dvf, momentum=False):
         w = self.window
         if self.n_slots > 1:
-            KC.contact_update(self.B, vf, dvf, momentum, flags, self.mass_cutoff, self.friction, SEP, w.bc_mask,
-                              0, w.shape[0], 0, w.shape[1])
+            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, FILL, RAW,
+                              w.bc_mask, 0, w.shape[0], 0, w.shape[1])
 
     def update_grid(self, dt):
         """Each slot's momentum update with its BCs, then the contact correction of the new
@@ -150,13 +152,14 @@ class ContactSolver(Solver):
         if PRE:
             self._contact(KC.MOM, -1, True)
         self._per_slot(super().update_grid, dt)
-        self._contact(KC.MOM, KC.FORCE, flags=1)
+        self._contact(KC.MOM, KC.FORCE)
 
     def grid_velocity(self, source, target):
         """Each slot's v = (mv)/m with its BCs, then the contact correction (the interpolated
         velocity from which USF and MUSL take the strain increment)."""
         self._per_slot(super().grid_velocity, _field(source), _field(target))
-        self._contact(_field(target), -1, flags=2 if FLAGS and target == 5 else 0)
+        if os.environ.get("REMAPC", "1") == "1":
+            self._contact(_field(target), -1)
 
     def grid_to_particles(self, remap):
         p = self.particles

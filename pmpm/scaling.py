@@ -65,7 +65,7 @@ def scaling(args):
     aspect = size if args.mode == "weak" else 1.0
 
     def scene_fn(n):
-        return block_scene(n, aspect=aspect, extra_solver={"sort_interval": 20})
+        return block_scene(n, ppc=args.ppc, aspect=aspect, extra_solver={"sort_interval": 20})
 
     ref_cpu = _reference_cpu(scene_fn, total, args.steps, comm) if size > 1 else None
     solver = Solver(scene_fn(total), comm)
@@ -88,7 +88,8 @@ def scaling(args):
         print(f"{r:>4} {n:>10d} {c:>10.3f} {m:>8.3f} {hb:>12.0f} {mb:>12.0f}")
     inflation = sum(r[2] for r in rows) / ref_cpu
     with_comm = sum(r[6] for r in rows) / ref_cpu
-    result = {"ranks": size, "mode": args.mode, "particles": n_total, "steps": args.steps,
+    result = {"ranks": size, "mode": args.mode, "particles": n_total, "steps": args.steps, "ppc": args.ppc,
+              "grid_cells": list(solver.grid.cells),
               "work_inflation": inflation, "work_inflation_with_comm": with_comm,
               "one_rank_cpu_s": ref_cpu,
               "halo_bytes_per_step": float(np.mean([r[4] for r in rows])),

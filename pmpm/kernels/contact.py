@@ -26,19 +26,15 @@ from ..shape import weights
 from .transfer import _external_force
 
 __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
-           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "OFFSET", "REMAP"]
+           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "AREA", "REMAP"]
 
-N_BODY_FIELDS = 12
-FLAG = 11
-MASS, MOM, FORCE, GRAD, OFFSET, REMAP = 0, 1, 3, 5, 7, 9
-
-#: a pair normal shorter than this (the two unit mass gradients nearly parallel, not opposed)
-#: gives no direction: the node is left uncorrected
-_MIN_NORMAL = 1e-6
-
+N_BODY_FIELDS = 10
+import os
+TAIL = float(os.environ.get('TAIL', '0'))
+MASS, MOM, FORCE, GRAD, AREA, REMAP = 0, 1, 3, 5, 7, 8
 
 @nb.njit(cache=True)
-def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, load_vec,
+def p2g_bodies(x, m, v, vol, area, stress, body, slot_of, gravity, load_id, load_w, load_vec,
                B, ox, oy, origin, inv_h, ncx, ncy, shape):
     """:func:`pmpm.kernels.transfer.p2g` into each particle's own slot; with the mass and
     momentum (``v`` not None) also the mass gradient sum m_p grad N_i (fields 5, 6)."""
@@ -54,8 +50,7 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
             mvx = mp * v[p, 0]
             mvy = mp * v[p, 1]
             mg = mp * inv_h
-            rx0 = sx - i0  # offset from the first support node, cell units
-            ry0 = sy - j0
+            ap = area[p] * inv_h * inv_h  # the particle's area in cells
         fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
         if stress is not None:
             a = -vol[p] * inv_h
@@ -75,8 +70,7 @@ def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, lo
                     B[ii, jj, s, 2] += w * mvy
                     B[ii, jj, s, 5] += mg * dnx
                     B[ii, jj, s, 6] += mg * dny
-                    B[ii, jj, s, 7] += w * mp * (rx0 - a_)
-                    B[ii, jj, s, 8] += w * mp * (ry0 - b_)
+                    B[ii, jj, s, 7] += w * ap
                 if with_force:
                     fnx = w * fx
                     fny = w * fy
@@ -96,25 +90,27 @@ def _unit(x, y):
 
 
 @nb.njit(cache=True, inline="always")
-def _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask):
+def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_normals, bc_mask):
     """The contact correction at node (i, j); see :func:`contact_update`."""
     ns = B.shape[2]
     count = 0
     mtot = 0.0
     px = 0.0
     py = 0.0
+    fill = 0.0
     for s in range(ns):
         ms = B[i, j, s, 0]
-        if ms > mass_cutoff:
+        if ms > mass_cutoff and B[i, j, s, AREA] >= TAIL:
             count += 1
             mtot += ms
+            fill += B[i, j, s, AREA]
             if momentum:
                 px += B[i, j, s, vf]
                 py += B[i, j, s, vf + 1]
             else:
                 px += ms * B[i, j, s, vf]
                 py += ms * B[i, j, s, vf + 1]
-    if count < 2:
+    if count < 2 or not fill >= min_fill:
         return 0
     vcx = px / mtot
     vcy = py / mtot
@@ -123,37 +119,43 @@ def _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, b
     corrected = 0
     for b in range(ns):
         mb = B[i, j, b, 0]
-        if not mb > mass_cutoff:
+        if not (mb > mass_cutoff and B[i, j, b, AREA] >= TAIL):
             continue
-        # outward normal: own unit mass gradient minus the others' (a pair shares it)
+        # outward normal: own mass gradient minus the others' (a pair shares it)
         rx = 0.0
         ry = 0.0
-        mo = 0.0  # the others' mass and mass-weighted offsets
-        cx_o = 0.0
-        cy_o = 0.0
         for c in range(ns):
-            mc = B[i, j, c, 0]
-            if c != b and mc > mass_cutoff:
-                ux, uy = _unit(B[i, j, c, GRAD], B[i, j, c, GRAD + 1])
-                rx += ux
-                ry += uy
-                mo += mc
-                cx_o += B[i, j, c, OFFSET]
-                cy_o += B[i, j, c, OFFSET + 1]
-        ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
-        nx = ux - rx
-        ny = uy - ry
+            if c != b and B[i, j, c, 0] > mass_cutoff and B[i, j, c, AREA] >= TAIL:
+                rx += B[i, j, c, GRAD]
+                ry += B[i, j, c, GRAD + 1]
+        if raw_normals == 1:
+            ux, uy = B[i, j, b, GRAD], B[i, j, b, GRAD + 1]
+            nx = ux - rx
+            ny = uy - ry
+        else:
+            ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
+            rx0 = rx
+            ry0 = ry
+            rx, ry = _unit(rx, ry)
+            if raw_normals == 3:  # the stronger gradient's direction
+                gb = B[i, j, b, GRAD] ** 2 + B[i, j, b, GRAD + 1] ** 2
+                gr = rx0 * rx0 + ry0 * ry0
+                if gb > gr or (gb == gr and b == 0):
+                    nx, ny = ux, uy
+                else:
+                    nx, ny = -rx, -ry
+            elif raw_normals == 2:  # each side weighted by the other side's mass
+                mr = mtot - mb
+                nx = mr * ux - mb * rx
+                ny = mr * uy - mb * ry
+            else:
+                nx = ux - rx
+                ny = uy - ry
         nn = math.sqrt(nx * nx + ny * ny)
-        if not nn > _MIN_NORMAL:
+        if not nn > 0.0:
             continue
         nx /= nn
         ny /= nn
-        # displacement check: the others' material centroid (as the node sees it) lies less
-        # than sep_max cells beyond this slot's along its normal
-        gap = ((cx_o / mo - B[i, j, b, OFFSET] / mb) * nx
-               + (cy_o / mo - B[i, j, b, OFFSET + 1] / mb) * ny)
-        if not gap < sep_max:
-            continue
         vx = B[i, j, b, vf]
         vy = B[i, j, b, vf + 1]
         if momentum:
@@ -162,13 +164,6 @@ def _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, b
         dx = vx - vcx
         dy = vy - vcy
         dn = dx * nx + dy * ny
-        if flags == 1:
-            B[i, j, b, FLAG] = 0.0
-        force = flags == 2 and B[i, j, b, FLAG] != 0.0
-        if force and dn < 0.0:
-            dn = -dn
-            dx = -dx
-            dy = -dy
         if dn > 0.0:  # approaching
             tx = dx - dn * nx
             ty = dy - dn * ny
@@ -189,40 +184,23 @@ def _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, b
             else:
                 B[i, j, b, vf] += cx
                 B[i, j, b, vf + 1] += cy
-            if force and ((vx - vcx) * nx + (vy - vcy) * ny) < 0.0:
-                cx = -cx
-                cy = -cy
             if dvf >= 0:
                 B[i, j, b, dvf] += cx
                 B[i, j, b, dvf + 1] += cy
-            if flags == 1:
-                B[i, j, b, FLAG] = 1.0
             corrected += 1
     return corrected
 
 
 @nb.njit(cache=True)
-def contact_update(B, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask, i_lo, i_hi, j_lo, j_hi):
-    """Contact correction of the slot velocities in fields ``vf, vf + 1`` (and, if ``dvf`` >= 0,
-    the same change of the velocity changes in ``dvf, dvf + 1``) over window rows [i_lo, i_hi)
-    x [j_lo, j_hi); the velocities already obey the BCs, and constrained components are left
-    alone. Returns the number of corrected (node, slot) pairs.
-
-    Where two or more slots have more mass than ``mass_cutoff``: the centre-of-mass velocity
-    v_cm = sum m_b v_b / sum m_b; for each slot b the outward normal n_b is the normalised
-    difference of its own unit mass gradient and the other slots' (n_b = (g_b - g_c) /
-    |g_b - g_c| for a pair: both share one normal, with opposite signs). The mass gradient
-    g_b = sum_p m_p grad N_i(x_p) points *out* of body b (grad N_i at a particle points towards
-    the node, i.e. away from the particles: it is minus the gradient of the smoothed density
-    at the node). If b approaches,
-    (v_b - v_cm) . n_b > 0, its normal relative velocity is removed and its tangential relative
-    velocity reduced by at most ``mu`` times the normal correction (Coulomb: it sticks when that
-    is enough). Separating slots are left alone. Between two slots the corrections conserve
-    momentum exactly (m_a dv_a = -m_b dv_b)."""
+def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_normals, bc_mask,
+                   i_lo, i_hi, j_lo, j_hi):
+    """Contact correction (see the module docstring). Returns the number of corrected
+    (node, slot) pairs."""
     n = 0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
-            n += _contact_node(B, i, j, vf, dvf, momentum, flags, mass_cutoff, mu, sep_max, bc_mask)
+            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill,
+                               raw_normals, bc_mask)
     return n
 
 
@@ -271,8 +249,8 @@ def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, n
                 for b_ in range(len(wy)):
                     jj = j0 + b_ - oy
                     w = wx[a_] * wy[b_]
-                    B[ii, jj, s, 9] += w * mvx
-                    B[ii, jj, s, 10] += w * mvy
+                    B[ii, jj, s, 8] += w * mvx
+                    B[ii, jj, s, 9] += w * mvy
     return vmax2 ** 0.5, bad
 
 
