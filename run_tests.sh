@@ -14,9 +14,9 @@ serial=(tests/unit tests/verification tests/integration)
 python -m pytest -q -p no:cacheprovider "${serial[@]}" "$@"
 for n in 2 3 4; do
     echo "== MPI tests on $n ranks =="
-    mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q -p no:cacheprovider tests/mpi
+    mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q --color=no -p no:cacheprovider tests/mpi
 done
 if [ -d tests/hard/mpi ]; then
     echo "== hard cases on 3 ranks =="
-    mpirun -n 3 --oversubscribe --bind-to none python -m pytest -q -p no:cacheprovider tests/hard/mpi
+    mpirun -n 3 --oversubscribe --bind-to none python -m pytest -q --color=no -p no:cacheprovider tests/hard/mpi
 fi

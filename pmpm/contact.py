@@ -30,6 +30,7 @@ import logging
 import os
 PRE = os.environ.get('PRE') == '1'
 FLAGS = os.environ.get('FLAGS') == '1'
+PRE2 = os.environ.get('PRE2') == '1'
 LIM = float(os.environ.get('LIM', '0'))
 
 import numpy as np
@@ -150,8 +151,17 @@ class ContactSolver(Solver):
         """Each slot's momentum update with its BCs, then the contact correction of the new
         velocities and (the same change) of the velocity changes FLIP adds to the particles."""
         if PRE:
+            if PRE2:
+                P0 = self.B[..., 1:3].copy()
             self._contact(KC.MOM, -1, True)
+            if PRE2:
+                self._pc = self.B[..., 1:3].copy()
         self._per_slot(super().update_grid, dt)
+        if PRE and PRE2:
+            m = self.B[..., 0:1]
+            extra = np.where(m > self.mass_cutoff, (P0 - P0) , 0.0)
+            extra = np.divide(self._pc - P0, m, out=np.zeros_like(P0), where=m > self.mass_cutoff)
+            self.B[..., 3:5] += extra
         self._contact(KC.MOM, KC.FORCE)
 
     def grid_velocity(self, source, target):

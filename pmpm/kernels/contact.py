@@ -31,6 +31,7 @@ __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contac
 N_BODY_FIELDS = 10
 import os
 TAIL = float(os.environ.get('TAIL', '0'))
+FACING = float(os.environ.get('FACING', '-2'))
 MASS, MOM, FORCE, GRAD, AREA, REMAP = 0, 1, 3, 5, 7, 8
 
 @nb.njit(cache=True)
@@ -137,6 +138,8 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_nor
             rx0 = rx
             ry0 = ry
             rx, ry = _unit(rx, ry)
+            if ux * rx + uy * ry > -FACING:
+                continue
             if raw_normals == 3:  # the stronger gradient's direction
                 gb = B[i, j, b, GRAD] ** 2 + B[i, j, b, GRAD + 1] ** 2
                 gr = rx0 * rx0 + ry0 * ry0

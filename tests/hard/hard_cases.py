@@ -113,7 +113,9 @@ def run_case(scene, comm=None, probe=None, sample_every=1):
     except Exception as exc:  # UnstableRunError, ParticleExitError: reported by the checks
         rec.error = exc
     rec.wall = time.perf_counter() - t0
-    rec.ranks_used = int(np.count_nonzero(comm.allreduce(held, op=MPI.LOR)))
+    everywhere = np.zeros_like(held, dtype=np.int64)
+    comm.Allreduce(held.astype(np.int64), everywhere, op=MPI.MAX)
+    rec.ranks_used = int(np.count_nonzero(everywhere))
     rec.finish()
     return rec
 
