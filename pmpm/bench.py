@@ -110,6 +110,7 @@ def step_bytes_per_particle(solver):
     (counted once per phase) plus the grid window's passes, per particle."""
     p = solver.particles
     size = {k: a.itemsize * (a.size // max(len(a), 1)) for k, a in p.fields.items()}
+    size.setdefault("strain", 0)  # kept only when the scene outputs it
     passes = [  # (read, written) particle fields per phase of the MUSL step
         (("x", "m", "v", "vol", "stress"), ()),                               # particles_to_grid
         (("x", "m", "v"), ("v",)),                                            # grid_to_particles

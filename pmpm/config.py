@@ -295,7 +295,7 @@ def _output(t, stem, end_time, state_fields=()):
     names = [tr.name for tr in tracks]
     if len(set(names)) != len(names):
         raise ConfigError("output.track", "track names must be unique")
-    fields = t.raw("fields", ["x", "v", "stress", "strain"])
+    fields = t.raw("fields", ["x", "v", "stress"])
     if not isinstance(fields, list) or not all(isinstance(f, str) for f in fields):
         raise ConfigError("output.fields", "must be a list of field names")
     known = ("id",) + PARTICLE_FIELDS + tuple(sorted(set(state_fields) - set(PARTICLE_FIELDS)))

@@ -8,30 +8,29 @@ Bardenhagen, Brackbill & Sulsky (2000) and Bardenhagen et al. (2001):
 * each contact body (``contact.bodies``, default every body; the bodies not named share one
   more field) maps its mass, momentum, force and mass gradient sum_p m_p grad N_i to its own
   nodal fields, a *slot* of the body window ``B`` (:mod:`pmpm.kernels.contact`);
+* at nodes where two or more slots have mass, a slot approaching the centre of mass along the
+  contact normal loses its normal relative velocity, and its tangential relative velocity by at
+  most ``friction`` times that (Coulomb); separating bodies are left alone, components that an
+  essential BC constrains are not touched (the rule, the normal and the facing test are in
+  :mod:`pmpm.kernels.contact`);
+* the correction is made twice a step, as Uintah's friction contact does: on the momenta mapped
+  from the particles, so that the momentum update starts from a field without interpenetration
+  (this one is not passed on to the particles: their velocities change through the stresses the
+  held surfaces build up), and on the updated velocities, by the same amount on the velocity
+  change FLIP adds to the particles. The velocities from which USF and MUSL take the strain
+  increment are corrected the same way;
 * each slot's nodal update is the base solver's own (``Solver.update_grid`` and
-  ``Solver.grid_velocity`` run on the slot as if it were the single field, essential BCs and
-  all), so every slot obeys the BCs;
-* then, at nodes where two or more slots have mass, a slot approaching the centre of mass along
-  its outward normal (from the mass gradients, shared by a pair) loses its normal relative
-  velocity, and its tangential relative velocity by at most ``friction`` times that (Coulomb);
-  separating bodies are left alone, constrained components are not touched. The correction is
-  applied to the updated velocity and by the same amount to the velocity change FLIP adds to
-  the particles, and also to the interpolated velocities from which USF and MUSL take the
-  strain increment;
+  ``Solver.grid_velocity`` run on each slot as if it were the single field: BCs, damping,
+  moving supports and their energy accounting included);
 * grid to particles, the MUSL re-map, the strain increment and the position update use each
   particle's own slot.
 
 Everything else (materials, loads, migration, output, the schemes' ordering of the phases) is
-the base :class:`~pmpm.solver.Solver`'s: only the grid phases are overridden. The per-body
-fields, mass gradient included, go through the same halo accumulate/fill as the single field.
-Without ``[contact]`` none of this is imported or run.
+the base :class:`~pmpm.solver.Solver`'s. The per-body fields, mass gradient included, go through
+the same halo accumulate/fill as the single field. Without ``[contact]`` none of this is
+imported or run.
 """
 import logging
-import os
-PRE = os.environ.get('PRE') == '1'
-FLAGS = os.environ.get('FLAGS') == '1'
-PRE2 = os.environ.get('PRE2') == '1'
-LIM = float(os.environ.get('LIM', '0'))
 
 import numpy as np
 
@@ -41,11 +40,10 @@ from .solver import Solver
 __all__ = ["ContactSolver", "contact_slots"]
 logger = logging.getLogger(__name__)
 
-#: single-field layout (pmpm.kernels) where the body layout inserts the mass gradient
+#: first single-field index (pmpm.kernels) that the body layout shifts to make room for the
+#: mass gradient, and by how much
 _FIRST_SHIFTED = 5
-_SHIFT = KC.REMAP - 5
-FILL = float(os.environ.get("FILL", "0"))
-RAW = int(os.environ.get("RAW", "0"))
+_SHIFT = KC.REMAP - _FIRST_SHIFTED
 
 
 def contact_slots(scene):
@@ -83,13 +81,12 @@ class ContactSolver(Solver):
             raise ValueError("ContactSolver needs a scene with a [contact] section")
         self.friction = float(scene.contact.friction)
         self.slot_of, self.n_slots = contact_slots(scene)
+        self.corrections = 0  # (node, slot) corrections on this rank, ghosts included
         super().__init__(scene, comm)
-        logger.debug("contact: %d velocity fields, friction %g", self.n_slots, self.friction)
 
     def describe(self):
         """One line for the log's list of effects."""
-        return (f"contact with friction {self.friction:g} ({self.n_slots} velocity fields, "
-                f"Bardenhagen et al. 2001)")
+        return f"contact with friction {self.friction:g} ({self.n_slots} velocity fields)"
 
     # -- the body window ---------------------------------------------------------------------
     def _build_window(self):
@@ -101,37 +98,19 @@ class ContactSolver(Solver):
         return (self.B, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
 
     def _halo_views(self, fields):
-        """Views of ``B`` for the single-field slice ``fields``: the same fields of every slot;
-        the mass gradient travels with the mass."""
+        """Views of ``B`` for the single-field slice ``fields``: those fields of every slot; the
+        mass gradient travels with the mass."""
         a, b = fields.start, fields.stop
-        a2 = _field(a)
-        b2 = b if b <= _FIRST_SHIFTED else b + _SHIFT
-        if a == 0 and b2 == KC.GRAD:
-            return [self.B[..., a2:KC.REMAP]]
+        a2, b2 = _field(a), (b if b <= _FIRST_SHIFTED else b + _SHIFT)
+        if a == 0 and b2 == KC.GRAD:  # mass .. force: one contiguous block with the gradient
+            return [self.B[..., a2:KC.GRAD + 2]]
         views = [self.B[..., a2:b2]]
         if a == 0:
-            views.append(self.B[..., KC.GRAD:KC.REMAP])
+            views.append(self.B[..., KC.GRAD:KC.GRAD + 2])
         return views
 
-    # -- the phases that differ -----------------------------------------------------------------
-    def reset_grid(self):
-        self.B.fill(0.0)
-
-    def particles_to_grid(self, momentum, forces):
-        p = self.particles
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
-        KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["vol"],
-                      p["stress"] if forces else None, p["body"], self.slot_of,
-                      gravity, load_id, load_w, load_vec, *self._body_geometry())
-
-    def exchange_halo(self, fields):
-        for view in self._halo_views(fields):
-            self.decomp.accumulate(view)
-            self.decomp.fill(view)
-
     def _per_slot(self, phase, *args):
-        """Run a base-solver grid phase on each slot as if it were the single field: the same
-        kernels, so damping, moving supports and the energy accounting are the base's."""
+        """Run a base-solver grid phase on each slot as if it were the single field."""
         w = self.window
         G = w.G
         try:
@@ -144,37 +123,44 @@ class ContactSolver(Solver):
     def _contact(self, vf, dvf, momentum=False):
         w = self.window
         if self.n_slots > 1:
-            KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff, self.friction, FILL, RAW,
-                              w.bc_mask, 0, w.shape[0], 0, w.shape[1])
+            self.corrections += KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff,
+                                                  self.friction, w.bc_mask, 0, w.shape[0], 0, w.shape[1])
+
+    # -- the phases that differ -----------------------------------------------------------------
+    def reset_grid(self):
+        self.B.fill(0.0)
+
+    def particles_to_grid(self, momentum, forces):
+        p = self.particles
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
+        KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
+                      p["stress"] if forces else None, p["body"], self.slot_of,
+                      gravity, load_id, load_w, load_vec, *self._body_geometry())
+
+    def exchange_halo(self, fields):
+        for view in self._halo_views(fields):
+            self.decomp.accumulate(view)
+            self.decomp.fill(view)
 
     def update_grid(self, dt):
-        """Each slot's momentum update with its BCs, then the contact correction of the new
-        velocities and (the same change) of the velocity changes FLIP adds to the particles."""
-        if PRE:
-            if PRE2:
-                P0 = self.B[..., 1:3].copy()
-            self._contact(KC.MOM, -1, True)
-            if PRE2:
-                self._pc = self.B[..., 1:3].copy()
+        """Contact correction of the mapped momenta, each slot's momentum update with its BCs,
+        then the contact correction of the new velocities and of the velocity changes."""
+        self._contact(KC.MOM, -1, momentum=True)
         self._per_slot(super().update_grid, dt)
-        if PRE and PRE2:
-            m = self.B[..., 0:1]
-            extra = np.where(m > self.mass_cutoff, (P0 - P0) , 0.0)
-            extra = np.divide(self._pc - P0, m, out=np.zeros_like(P0), where=m > self.mass_cutoff)
-            self.B[..., 3:5] += extra
         self._contact(KC.MOM, KC.FORCE)
 
     def grid_velocity(self, source, target):
-        """Each slot's v = (mv)/m with its BCs, then the contact correction (the interpolated
-        velocity from which USF and MUSL take the strain increment)."""
+        """Each slot's v = (mv)/m with its BCs, then the contact correction (the velocity from
+        which USF and MUSL take the strain increment)."""
         self._per_slot(super().grid_velocity, _field(source), _field(target))
-        if os.environ.get("REMAPC", "1") == "1":
-            self._contact(_field(target), -1)
+        self._contact(_field(target), -1)
 
     def grid_to_particles(self, remap):
         p = self.particles
+        self._dx = self._scratch("_dx_buf", (p.n, 2))
         vmax, bad = KC.g2p_velocity_bodies(p["x"], p["m"], p["v"], p["body"], self.slot_of,
-                                           self.scene.solver.pic_blend, *self._body_geometry(), remap)
+                                           self.scene.solver.pic_blend, *self._body_geometry(),
+                                           remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
 
     def update_strain(self, dt, velocity_field, move=True):
@@ -184,13 +170,13 @@ class ContactSolver(Solver):
         self._de, self._dw = de, dw
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += KC.g2p_kinematics_bodies(
-            p["x"], p["m"], p["vol"], p["strain"], de, dw, p["body"], self.slot_of,
-            _field(velocity_field), move, dt, gravity, load_id, load_w, load_vec,
-            *self._body_geometry())
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, p["body"], self.slot_of,
+            _field(velocity_field), self._dx if move else None, dt,
+            gravity, load_id, load_w, load_vec, *self._body_geometry())
 
     def move_particles(self, dt):
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += KC.g2p_kinematics_bodies(
-            p["x"], p["m"], p["vol"], p["strain"], None, None, p["body"], self.slot_of,
-            KC.MOM, True, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())
+            p["x"], p["m"], p["vol"], None, None, None, p["body"], self.slot_of,
+            KC.MOM, self._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())

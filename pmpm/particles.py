@@ -9,7 +9,7 @@ import logging
 
 import numpy as np
 
-__all__ = ["Particles", "CORE_FIELDS"]
+__all__ = ["Particles", "CORE_FIELDS", "OPTIONAL_FIELDS"]
 logger = logging.getLogger(__name__)
 
 #: fields every particle has: name -> (trailing shape, dtype)
@@ -21,9 +21,14 @@ CORE_FIELDS = {
     "m": ((), np.float64),       # mass
     "vol": ((), np.float64),     # current volume (area x out-of-plane thickness)
     "stress": ((4,), np.float64),  # sxx, syy, sxy, szz
-    "strain": ((3,), np.float64),  # exx, eyy, gxy (engineering shear), accumulated increments
     "mat": ((), np.int32),       # index of the particle's material in the scene
     "body": ((), np.int32),      # index of the body it was created in
+}
+
+
+#: fields kept only when the scene asks for them in [output] fields (they cost memory and traffic)
+OPTIONAL_FIELDS = {
+    "strain": ((3,), np.float64),  # exx, eyy, gxy (engineering shear), accumulated increments
 }
 
 

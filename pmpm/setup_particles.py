@@ -12,7 +12,7 @@ import numpy as np
 from decomposition import SlabDecomposition, balanced_bounds, max_ranks
 from .bodies import generate_body
 from .errors import ConfigError
-from .particles import CORE_FIELDS, Particles
+from .particles import CORE_FIELDS, OPTIONAL_FIELDS, Particles
 
 __all__ = ["place_points", "create_particles", "choose_axis", "make_decomposition"]
 logger = logging.getLogger(__name__)
@@ -33,7 +33,7 @@ def place_points(scene, grid, materials, labels):
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
 
 
-def create_particles(points, keep, materials):
+def create_particles(points, keep, materials, optional=()):
     """The full particle state of the points selected by ``keep`` (a boolean mask): core
     fields, material state, and the global id (the point's index in the scene). Only the
     owned points get full fields, so no rank ever holds the whole scene's state."""
@@ -45,6 +45,9 @@ def create_particles(points, keep, materials):
     fields["x0"][...] = fields["x"]
     fields["id"][...] = idx
     particles = Particles(fields)
+    for name in optional:
+        shape, dtype = OPTIONAL_FIELDS[name]
+        particles.add_field(name, shape, dtype)
     for material in materials:
         for name, shape in material.state_fields.items():
             particles.add_field(name, shape)

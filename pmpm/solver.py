@@ -25,6 +25,7 @@ from .groundmotion import GroundMotion
 from .loads import Loads
 from .materials import make_material
 from .schemes import make_scheme
+from .particles import OPTIONAL_FIELDS
 from .setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from .shape import SHAPE_TAGS, ghost_width, min_cells
 from .errors import ConfigError
@@ -76,7 +77,8 @@ class Solver:
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
                                          ghost_width(cfg.shape_function), points["x"])
-        self.particles = create_particles(points, self._owned(points["x"]), self.materials)
+        optional = [f for f in OPTIONAL_FIELDS if f in scene.output.fields]
+        self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
         del points
         self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
         self._build_window()
@@ -184,7 +186,7 @@ class Solver:
         self._de, self._dw = de, dw
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p["strain"], de, dw, velocity_field, self._dx if move else None, dt,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, velocity_field, self._dx if move else None, dt,
             gravity, load_id, load_w, load_vec, *self._geometry())
 
     def move_particles(self, dt):
@@ -192,7 +194,7 @@ class Solver:
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p["strain"], None, None, 1, self._dx, dt,
+            p["x"], p["m"], p["vol"], None, None, None, 1, self._dx, dt,
             gravity, load_id, load_w, load_vec, *self._geometry())
 
     def update_stress(self):

@@ -1,19 +1,36 @@
 """Kernels of multi-velocity-field contact (Bardenhagen, Brackbill & Sulsky 2000; Bardenhagen
 et al. 2001): each contact body keeps its own nodal fields.
 
-The body window is ``B[i - ox, j - oy, slot, field]`` (node-interleaved, the slots of a node
+The body window is ``B[i - ox, j - oy, slot, field]`` (node-interleaved: the slots of a node
 together, then the fields of a slot), with fields
 
     0 mass | 1, 2 momentum, then velocity after the grid update | 3, 4 force, then velocity change
-    5, 6 mass gradient sum_p m_p grad N_i (scattered with the mass) | 7, 8 re-mapped momentum
-    (MUSL), then re-mapped velocity
+    5, 6 mass gradient g = sum_p m_p grad N_i(x_p) (scattered with the mass) | 7, 8 re-mapped
+    momentum (MUSL), then re-mapped velocity
 
 i.e. the single-field layout of :mod:`pmpm.kernels` with the mass gradient inserted before the
 re-mapped momentum, so ``B[:, :, s]`` is a single-field window on which the grid-node kernels of
-:mod:`pmpm.kernels.grid_ops` run unchanged. A particle's slot is ``slot_of[body[p]]``. The
-centre-of-mass field is the sum over the slots, formed on the fly where it is needed (nodes
-where two or more slots have mass). With one slot every transfer here does exactly what its
-single-field twin does.
+:mod:`pmpm.kernels.grid_ops` run unchanged. A particle's slot is ``slot_of[body[p]]``. With one
+slot every transfer here does exactly what its single-field twin in
+:mod:`pmpm.kernels.transfer` does (the tests check it to the bit).
+
+The contact correction (:func:`contact_update`) acts at nodes where two or more slots have mass:
+
+* the centre-of-mass velocity v_cm = sum_b m_b v_b / sum_b m_b;
+* slot b is compared with the others together ("the rest", r): g_b points *out* of body b
+  (grad N_i at a particle points towards the node, away from the particles), g_r = sum of the
+  others' gradients. The two sides must face each other, unit(g_b) . unit(g_r) <= -1/2: where
+  they do not (the front face of a block over the surface of the body it slides on, where
+  that body's shape functions reach a cell above its surface), it is not a contact;
+* the contact normal is the direction of the stronger of the two mass gradients (the side
+  whose surface the node resolves better: the flat surface under a block's corner, not the
+  corner), n_b = unit(g_b) or -unit(g_r), the average of the two unit normals when the
+  magnitudes tie to 1e-9 (a symmetric contact). Between two slots both use the same normal with
+  opposite signs, so the corrections conserve momentum exactly;
+* if b approaches, (v_b - v_cm) . n_b > 0, its normal relative velocity is removed and its
+  tangential relative velocity reduced by at most ``mu`` times the normal correction (Coulomb;
+  it sticks when that is enough). Separating slots are left alone, and components that an
+  essential BC constrains are not touched.
 
 Optional effects are passed as ``None`` (compiled out), the basis as a tag of
 ``pmpm.shape.SHAPE_TAGS``, as in :mod:`pmpm.kernels.transfer`.
@@ -26,16 +43,20 @@ from ..shape import weights
 from .transfer import _external_force
 
 __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
-           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "AREA", "REMAP"]
+           "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "REMAP", "FACING"]
 
-N_BODY_FIELDS = 10
-import os
-TAIL = float(os.environ.get('TAIL', '0'))
-FACING = float(os.environ.get('FACING', '-2'))
-MASS, MOM, FORCE, GRAD, AREA, REMAP = 0, 1, 3, 5, 7, 8
+N_BODY_FIELDS = 9
+MASS, MOM, FORCE, GRAD, REMAP = 0, 1, 3, 5, 7
+
+#: two sides are in contact at a node only if their unit mass gradients make an angle of at
+#: least 120 degrees (cosine <= -1/2); surfaces meeting at right angles are not in contact
+FACING = -0.5
+#: mass gradients whose magnitudes differ by less than this (relative) tie
+_TIE = 1e-9
+
 
 @nb.njit(cache=True)
-def p2g_bodies(x, m, v, vol, area, stress, body, slot_of, gravity, load_id, load_w, load_vec,
+def p2g_bodies(x, m, v, vol, stress, body, slot_of, gravity, load_id, load_w, load_vec,
                B, ox, oy, origin, inv_h, ncx, ncy, shape):
     """:func:`pmpm.kernels.transfer.p2g` into each particle's own slot; with the mass and
     momentum (``v`` not None) also the mass gradient sum m_p grad N_i (fields 5, 6)."""
@@ -51,9 +72,9 @@ def p2g_bodies(x, m, v, vol, area, stress, body, slot_of, gravity, load_id, load
             mvx = mp * v[p, 0]
             mvy = mp * v[p, 1]
             mg = mp * inv_h
-            ap = area[p] * inv_h * inv_h  # the particle's area in cells
         fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
         if stress is not None:
+            # f_int = -V sigma . grad N  (gradient in cell units times 1/h)
             a = -vol[p] * inv_h
             sxx = a * stress[p, 0]
             syy = a * stress[p, 1]
@@ -71,7 +92,6 @@ def p2g_bodies(x, m, v, vol, area, stress, body, slot_of, gravity, load_id, load
                     B[ii, jj, s, 2] += w * mvy
                     B[ii, jj, s, 5] += mg * dnx
                     B[ii, jj, s, 6] += mg * dny
-                    B[ii, jj, s, 7] += w * ap
                 if with_force:
                     fnx = w * fx
                     fny = w * fy
@@ -83,35 +103,25 @@ def p2g_bodies(x, m, v, vol, area, stress, body, slot_of, gravity, load_id, load
 
 
 @nb.njit(cache=True, inline="always")
-def _unit(x, y):
-    n = math.sqrt(x * x + y * y)
-    if n > 0.0:
-        return x / n, y / n
-    return 0.0, 0.0
-
-
-@nb.njit(cache=True, inline="always")
-def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_normals, bc_mask):
-    """The contact correction at node (i, j); see :func:`contact_update`."""
+def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask):
+    """The contact correction at node (i, j); see the module docstring and contact_update."""
     ns = B.shape[2]
     count = 0
     mtot = 0.0
     px = 0.0
     py = 0.0
-    fill = 0.0
     for s in range(ns):
         ms = B[i, j, s, 0]
-        if ms > mass_cutoff and B[i, j, s, AREA] >= TAIL:
+        if ms > mass_cutoff:
             count += 1
             mtot += ms
-            fill += B[i, j, s, AREA]
             if momentum:
                 px += B[i, j, s, vf]
                 py += B[i, j, s, vf + 1]
             else:
                 px += ms * B[i, j, s, vf]
                 py += ms * B[i, j, s, vf + 1]
-    if count < 2 or not fill >= min_fill:
+    if count < 2:
         return 0
     vcx = px / mtot
     vcy = py / mtot
@@ -120,45 +130,38 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_nor
     corrected = 0
     for b in range(ns):
         mb = B[i, j, b, 0]
-        if not (mb > mass_cutoff and B[i, j, b, AREA] >= TAIL):
+        if not mb > mass_cutoff:
             continue
-        # outward normal: own mass gradient minus the others' (a pair shares it)
-        rx = 0.0
-        ry = 0.0
+        gbx = B[i, j, b, GRAD]
+        gby = B[i, j, b, GRAD + 1]
+        grx = 0.0  # the rest's mass gradient
+        gry = 0.0
         for c in range(ns):
-            if c != b and B[i, j, c, 0] > mass_cutoff and B[i, j, c, AREA] >= TAIL:
-                rx += B[i, j, c, GRAD]
-                ry += B[i, j, c, GRAD + 1]
-        if raw_normals == 1:
-            ux, uy = B[i, j, b, GRAD], B[i, j, b, GRAD + 1]
-            nx = ux - rx
-            ny = uy - ry
-        else:
-            ux, uy = _unit(B[i, j, b, GRAD], B[i, j, b, GRAD + 1])
-            rx0 = rx
-            ry0 = ry
-            rx, ry = _unit(rx, ry)
-            if ux * rx + uy * ry > -FACING:
-                continue
-            if raw_normals == 3:  # the stronger gradient's direction
-                gb = B[i, j, b, GRAD] ** 2 + B[i, j, b, GRAD + 1] ** 2
-                gr = rx0 * rx0 + ry0 * ry0
-                if gb > gr or (gb == gr and b == 0):
-                    nx, ny = ux, uy
-                else:
-                    nx, ny = -rx, -ry
-            elif raw_normals == 2:  # each side weighted by the other side's mass
-                mr = mtot - mb
-                nx = mr * ux - mb * rx
-                ny = mr * uy - mb * ry
-            else:
-                nx = ux - rx
-                ny = uy - ry
-        nn = math.sqrt(nx * nx + ny * ny)
-        if not nn > 0.0:
+            if c != b and B[i, j, c, 0] > mass_cutoff:
+                grx += B[i, j, c, GRAD]
+                gry += B[i, j, c, GRAD + 1]
+        gb = math.sqrt(gbx * gbx + gby * gby)
+        gr = math.sqrt(grx * grx + gry * gry)
+        if not (gb > 0.0 and gr > 0.0):
             continue
-        nx /= nn
-        ny /= nn
+        ubx = gbx / gb
+        uby = gby / gb
+        urx = grx / gr
+        ury = gry / gr
+        if ubx * urx + uby * ury > FACING:
+            continue  # the two sides do not face each other
+        if abs(gb - gr) <= _TIE * (gb + gr):
+            nx = ubx - urx
+            ny = uby - ury
+            nn = math.sqrt(nx * nx + ny * ny)
+            nx /= nn
+            ny /= nn
+        elif gb > gr:
+            nx = ubx
+            ny = uby
+        else:
+            nx = -urx
+            ny = -ury
         vx = B[i, j, b, vf]
         vy = B[i, j, b, vf + 1]
         if momentum:
@@ -195,24 +198,26 @@ def _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_nor
 
 
 @nb.njit(cache=True)
-def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, min_fill, raw_normals, bc_mask,
-                   i_lo, i_hi, j_lo, j_hi):
-    """Contact correction (see the module docstring). Returns the number of corrected
+def contact_update(B, vf, dvf, momentum, mass_cutoff, mu, bc_mask, i_lo, i_hi, j_lo, j_hi):
+    """Contact correction over window rows [i_lo, i_hi) x [j_lo, j_hi) (see the module
+    docstring) of the slot velocities in fields ``vf, vf + 1`` or, with ``momentum``, of the
+    momenta there (the velocity being momentum / mass); with ``dvf`` >= 0 the same velocity
+    change is added to fields ``dvf, dvf + 1`` (the velocity change FLIP adds to the particles).
+    Slots lighter than ``mass_cutoff`` at a node take no part. Returns the number of corrected
     (node, slot) pairs."""
     n = 0
     for i in range(i_lo, i_hi):
         for j in range(j_lo, j_hi):
-            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, min_fill,
-                               raw_normals, bc_mask)
+            n += _contact_node(B, i, j, vf, dvf, momentum, mass_cutoff, mu, bc_mask)
     return n
 
 
 @nb.njit(cache=True)
 def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, ncx, ncy, shape,
-                        remap):
-    """:func:`pmpm.kernels.transfer.g2p_velocity` from each particle's own slot; the MUSL
-    re-map (``remap``) goes into fields 9, 10 of that slot. Returns the largest speed and the
-    number of non-finite velocities."""
+                        remap, dx, dt):
+    """:func:`pmpm.kernels.transfer.g2p_velocity` from each particle's own slot (the MUSL
+    re-map goes into fields 7, 8 of that slot; ``dx`` receives the move dt sum N_i v_i).
+    Returns the largest speed and the number of non-finite velocities."""
     vmax2 = 0.0
     bad = 0
     flip = 1.0 - pic
@@ -235,6 +240,8 @@ def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, n
                 vy += w * B[ii, jj, s, 2]
                 dvx += w * B[ii, jj, s, 3]
                 dvy += w * B[ii, jj, s, 4]
+        dx[p, 0] = dt * vx
+        dx[p, 1] = dt * vy
         nvx = flip * (v[p, 0] + dvx) + pic * vx
         nvy = flip * (v[p, 1] + dvy) + pic * vy
         v[p, 0] = nvx
@@ -252,18 +259,19 @@ def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, n
                 for b_ in range(len(wy)):
                     jj = j0 + b_ - oy
                     w = wx[a_] * wy[b_]
-                    B[ii, jj, s, 8] += w * mvx
-                    B[ii, jj, s, 9] += w * mvy
+                    B[ii, jj, s, 7] += w * mvx
+                    B[ii, jj, s, 8] += w * mvy
     return vmax2 ** 0.5, bad
 
 
 @nb.njit(cache=True)
-def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, move, dt,
+def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, dx, dt,
                           gravity, load_id, load_w, load_vec,
                           B, ox, oy, origin, inv_h, ncx, ncy, shape):
     """:func:`pmpm.kernels.transfer.g2p_kinematics` from each particle's own slot: strain
-    increment from its velocity field ``vel_field`` (body layout), position update with its
-    updated velocity (fields 1, 2). Returns the work of the external forces over the moves."""
+    increment from its velocity field ``vel_field`` (body layout), volume update (and
+    ``strain`` when not None), then (``dx`` not None) the move x += dx. Returns the work of the
+    external forces over the moves."""
     work = 0.0
     for p in range(x.shape[0]):
         s = slot_of[body[p]]
@@ -275,8 +283,6 @@ def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, m
         lxy = 0.0
         lyx = 0.0
         lyy = 0.0
-        ux = 0.0
-        uy = 0.0
         for a_ in range(len(wx)):
             ii = i0 + a_ - ox
             for b_ in range(len(wy)):
@@ -290,10 +296,6 @@ def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, m
                     lxy += gvx * dny
                     lyx += gvy * dnx
                     lyy += gvy * dny
-                if move:
-                    w = wx[a_] * wy[b_]
-                    ux += w * B[ii, jj, s, 1]
-                    uy += w * B[ii, jj, s, 2]
         if de is not None:
             c = dt * inv_h
             dexx = c * lxx
@@ -304,13 +306,14 @@ def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, m
             de[p, 2] = dgxy
             if dw is not None:
                 dw[p] = 0.5 * c * (lyx - lxy)
-            strain[p, 0] += dexx
-            strain[p, 1] += deyy
-            strain[p, 2] += dgxy
+            if strain is not None:
+                strain[p, 0] += dexx
+                strain[p, 1] += deyy
+                strain[p, 2] += dgxy
             vol[p] *= 1.0 + dexx + deyy
-        if move:
-            ux *= dt
-            uy *= dt
+        if dx is not None:
+            ux = dx[p, 0]
+            uy = dx[p, 1]
             x[p, 0] += ux
             x[p, 1] += uy
             fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)

@@ -131,8 +131,8 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
     """Strain increment from the grid velocity in ``vel_field`` (paper eq. 6), volume update,
     and (``dx`` not None) the position update x += dx computed by g2p_velocity (eq. 5).
 
-    ``de`` (N, 3) receives the strain increment when not None (``strain`` and ``vol`` are
-    updated with it); ``dw`` (N,) the spin increment when not None (objective stress rate).
+    ``de`` (N, 3) receives the strain increment when not None (``vol`` and, when kept,
+    ``strain`` are updated with it); ``dw`` (N,) the spin increment when not None (objective stress rate).
     Returns the work of the external forces over the moves."""
     work = 0.0
     for p in range(x.shape[0]):
@@ -167,9 +167,10 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
             de[p, 2] = dgxy
             if dw is not None:
                 dw[p] = 0.5 * c * (lyx - lxy)
-            strain[p, 0] += dexx
-            strain[p, 1] += deyy
-            strain[p, 2] += dgxy
+            if strain is not None:
+                strain[p, 0] += dexx
+                strain[p, 1] += deyy
+                strain[p, 2] += dgxy
             vol[p] *= 1.0 + dexx + deyy
         if dx is not None:
             ux = dx[p, 0]

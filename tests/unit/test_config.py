@@ -103,7 +103,7 @@ def test_defaults_are_resolved():
     out = s.output
     assert out.directory == "beam_results"
     assert math.isclose(out.interval, 0.01 / 20) and math.isclose(out.history_interval, 0.01 / 1000)
-    assert out.fields == ("x", "v", "stress", "strain") and out.track == ()
+    assert out.fields == ("x", "v", "stress") and out.track == ()
     assert (out.checkpoint_interval, out.deformed_plot, out.progress_interval) == (None, None, 2.0)
     p = s.parallel
     assert (p.axis, p.rebalance_threshold, p.rebalance_interval, p.io) == ("auto", None, 50, "mpio")

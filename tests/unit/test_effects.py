@@ -31,6 +31,7 @@ def _block(tmp_path, record, box_all=True, end=0.5, direction="x"):
         "boundary": [{"name": "ground", "type": "fixed", "lower": lower, "upper": upper}],
         "loads": {"ground_motion": {"file": str(record), "direction": direction}},
         "solver": {"end_time": end, "cfl": 0.5},
+        "output": {"fields": ["x", "v", "stress", "strain"]},  # keep the accumulated strain
     }, str(tmp_path / "block.toml"))
 
 

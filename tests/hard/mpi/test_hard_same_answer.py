@@ -50,44 +50,36 @@ def _relative(a, b):
     return float(np.abs(a - b).max()) / scale if b.size else 0.0
 
 
+def _compare_with_serial(scene, par, fields):
+    """Rank 0: run ``scene`` serially and compare with the parallel record; (ok, problems)."""
+    try:
+        ref = run_case(scene, MPI.COMM_SELF, sample_every=SAMPLE_EVERY)
+        ref_fields = gather_particles(ref.solver)
+    except Exception as exc:  # report it on every rank below instead of leaving them waiting
+        return False, [f"serial reference run failed: {exc!r}"]
+    if par.error is not None or ref.error is not None:
+        return False, [f"stopped: on {comm.size} ranks {par.error}, serial {ref.error}"]
+    if par.solver.step_count != ref.solver.step_count:
+        return False, [f"steps: {par.solver.step_count} on {comm.size} ranks, {ref.solver.step_count} serial"]
+    if not np.array_equal(fields["id"], ref_fields["id"]):
+        return False, ["different particle ids"]
+    pairs = {k: (fields[k], ref_fields[k]) for k in ("x", "v", "stress")}
+    pairs["energies"] = (par.energy, ref.energy)
+    pairs["tracks"] = (par.tracks, ref.tracks)
+    problems = [f"{k}: relative difference {err:.3g} > {RTOL}"
+                for k, err in ((k, _relative(a, b)) for k, (a, b) in pairs.items()) if not err <= RTOL]
+    return not problems, problems
+
+
 @pytest.mark.parametrize("name", CASES)
 def test_same_answer_on_one_and_several_ranks(name):
     scene = load(name)
     par = run_case(scene, comm, sample_every=SAMPLE_EVERY)
     fields = gather_particles(par.solver)
     migrated = comm.allreduce(int(par.solver.decomp.bytes_sent.get("migration", 0) > 0))
-    ok, report = True, []
-    if comm.rank == 0:
-        try:
-            ref = run_case(scene, MPI.COMM_SELF, sample_every=SAMPLE_EVERY)
-            ref_fields = gather_particles(ref.solver)
-        except Exception as exc:  # keep the other ranks out of a hang: fail everywhere below
-            ref, ref_fields = None, None
-            ok = False
-            report.append(f"serial reference run failed: {exc!r}")
-        if ref is None:
-            pass
-        elif par.error is not None or ref.error is not None:
-            ok = False
-            report.append(f"stopped: parallel {par.error}, serial {ref.error}")
-        elif par.solver.step_count != ref.solver.step_count:
-            ok = False
-            report.append(f"steps: {par.solver.step_count} on {comm.size} ranks, {ref.solver.step_count} serial")
-        elif not np.array_equal(fields["id"], ref_fields["id"]):
-            ok = False
-            report.append("different particle ids")
-        else:
-            pairs = {k: (fields[k], ref_fields[k]) for k in ("x", "v", "stress")}
-            pairs["energies"] = (par.energy, ref.energy)
-            pairs["tracks"] = (par.tracks, ref.tracks)
-            for k, (a, b) in pairs.items():
-                err = _relative(a, b)
-                if not err <= RTOL:
-                    ok = False
-                    report.append(f"{k}: relative difference {err:.3g} > {RTOL}")
-    polite_barrier(comm)
-    ok = _everywhere(ok)
-    assert ok, f"{name}: " + "; ".join(report)
+    ok, problems = _compare_with_serial(scene, par, fields) if comm.rank == 0 else (True, [])
+    polite_barrier(comm)  # the other ranks sleep while rank 0 runs the serial reference
+    assert _everywhere(ok), f"{name}: " + "; ".join(problems)
     # the case really was split: particles on at least two ranks, and moving between them
     assert par.ranks_used >= 2, f"{name}: all particles stayed on one rank"
     if name == "travelling_block":  # the block crosses every slab boundary
