@@ -88,7 +88,8 @@ class Record:
 
 def run_case(scene, comm=None, probe=None, sample_every=1):
     """Step ``scene`` on ``comm`` (default COMM_SELF) to its end time, recording the energies, the
-    tracked points and ``probe(solver)`` (collective if it reduces) every ``sample_every`` steps. Instability or particle loss is kept in ``record.error``, not raised."""
+    tracked points and ``probe(solver)`` (collective if it reduces) every ``sample_every`` steps.
+    Instability or particle loss is kept in ``record.error``, not raised."""
     comm = comm or MPI.COMM_SELF
     rec = Record()
     s = Solver(scene, comm)
@@ -158,8 +159,10 @@ def body_frame_energy(solver):
     m, v = p["m"], p["v"]
     vcm = (m[:, None] * v).sum(axis=0) / m.sum()
     kinetic = 0.5 * float(np.sum(m * np.sum((v - vcm) ** 2, axis=1)))
-    strain = sum(float(np.sum(p["vol"][p["mat"] == k] * mat.elastic_energy_density(p["stress"][p["mat"] == k])))
-                 for k, mat in enumerate(solver.materials))
+    strain = 0.0
+    for k, mat in enumerate(solver.materials):
+        sel = p["mat"] == k
+        strain += float(np.sum(p["vol"][sel] * mat.elastic_energy_density(p["stress"][sel])))
     return kinetic + strain
 
 

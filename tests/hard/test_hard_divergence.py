@@ -102,6 +102,7 @@ def test_fixed_step_above_the_limit_is_warned_caught_named_and_the_last_good_sta
         assert np.isfinite(fields[k]).all(), k
     kinetic = 0.5 * float(np.sum(fields["m"] * np.sum(fields["v"] ** 2, axis=1)))
     supplied = attrs["initial_energy"] + attrs["external_work"]
-    scale = max(kinetic, abs(attrs["internal_work"]), abs(attrs["initial_energy"]) + abs(attrs["external_work"]))
+    scale = max(kinetic, abs(attrs["internal_work"]),
+                abs(attrs["initial_energy"]) + abs(attrs["external_work"]))
     assert kinetic + attrs["internal_work"] - supplied <= ENERGY_TOLERANCE * scale
     assert math.isfinite(kinetic)
