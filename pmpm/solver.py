@@ -94,6 +94,7 @@ class Solver:
         self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
+        self._vmax_healthy = self.vmax
         self.initial_energy = self.energies()["total"]
 
     # -- set-up helpers ---------------------------------------------------------------------
@@ -120,8 +121,10 @@ class Solver:
         return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
 
     def critical_dt(self):
-        """The largest stable step by the CFL rule with C = 1 (for warnings and messages)."""
-        return self.grid.h / (self.wave_speed + self.vmax)
+        """The largest stable step by the CFL rule with C = 1 (for warnings and messages), with
+        the particle speed at the last energy check that passed (a diverging run's speed means
+        nothing)."""
+        return self.grid.h / (self.wave_speed + self._vmax_healthy)
 
     # -- arguments shared by the transfer kernels --------------------------------------------
     def _geometry(self):
@@ -219,10 +222,11 @@ class Solver:
         """One allreduce: the next time step (min over ranks) and every rank's troubles."""
         g, d = self.grid, self.decomp
         c0, c1 = d.owned
-        outside, leaving = K.count_strays(self.particles["x"], g.origin, g.inv_h, g.cells[0],
-                                          g.cells[1], self.axis, c0, min(c1, g.cells[self.axis]))
+        outside, leaving, inverted = K.count_strays(
+            self.particles["x"], self.particles["vol"], g.origin, g.inv_h, g.cells[0], g.cells[1],
+            self.axis, c0, min(c1, g.cells[self.axis]))
         vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
-        bad = self._bad_local + (0 if math.isfinite(vmax) else 1)
+        bad = self._bad_local + inverted + (0 if math.isfinite(vmax) else 1)
         flags = d.allreduce_max(np.array([vmax, bad, outside, leaving], dtype=np.float64))
         self.vmax = flags[0]
         return int(flags[1]), int(flags[2]), int(flags[3])
@@ -287,7 +291,7 @@ class Solver:
         self.scheme.advance(self, dt)
         bad, outside, leaving = self._check_and_next_dt()
         if bad:
-            raise UnstableRunError(f"non-finite particle velocity at t = {self.t + dt:.6g} s "
+            raise UnstableRunError(f"non-finite velocity or inverted volume at t = {self.t + dt:.6g} s "
                                    f"(step {self.step_count + 1}, dt = {dt:.3g} s; the stable step is "
                                    f"about {self.critical_dt():.3g} s)")
         if outside or (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0:
@@ -311,11 +315,15 @@ class Solver:
         e = self.energies()
         supplied = self.initial_energy + e["external_work"]
         scale = abs(self.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
-        if e["total"] - supplied > ENERGY_GROWTH_LIMIT * scale and scale > 0:
+        # kinetic energy alone as well: a diverging run can turn volumes (and the internal work
+        # integrated over them) negative, which hides the growth in the total
+        grown = max(e["total"], e["kinetic"]) - supplied
+        if grown > ENERGY_GROWTH_LIMIT * scale and scale > 0:
             raise UnstableRunError(
                 f"the run diverged at t = {self.t + dt:.6g} s (step {self.step_count + 1}): energy "
                 f"{e['total']:.4g} J exceeds the initial energy plus external work {supplied:.4g} J; "
                 f"dt = {dt:.3g} s, the stable step is about {self.critical_dt():.3g} s")
+        self._vmax_healthy = self.vmax
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self):

@@ -12,8 +12,8 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
 
     ``damping`` (None: off) is the mass-proportional coefficient alpha: the nodal force gains
     -alpha m v. Returns the energy damping dissipated and the work of the support reactions
-    (the impulses m (v_bc - v_free) that impose the BCs, times the node's mean velocity over
-    the step: a first-order estimate, nearly zero at fixed nodes),
+    (the impulses m (v_bc - v_free) that impose the BCs, times the prescribed velocity: exactly
+    zero at fixed supports, a first-order estimate for moving ones),
     summed over the nodes in ``owned`` = (axis, lo, hi) (ghost nodes are summed by their owner)."""
     dissipated = 0.0
     reactions = 0.0
@@ -42,8 +42,9 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
                     v_free = v_new
                     v_new = bc_vel[i, j, d]
                     if mine:
-                        # reaction impulse m (v_bc - v_free) through the mean node velocity
-                        reactions += mi * (v_new - v_free) * 0.5 * (v_old + v_new)
+                        # reaction impulse m (v_bc - v_free) times the support's own velocity:
+                        # a support that does not move does no work
+                        reactions += mi * (v_new - v_free) * v_new
                 G[i, j, 1 + d] = v_new
                 G[i, j, 3 + d] = v_new - v_old
                 if damping is not None and mine and accelerate:

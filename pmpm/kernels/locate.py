@@ -8,12 +8,17 @@ __all__ = ["count_strays", "cell_columns"]
 
 
 @nb.njit(cache=True)
-def count_strays(x, origin, inv_h, ncx, ncy, axis, c0, c1):
+def count_strays(x, vol, origin, inv_h, ncx, ncy, axis, c0, c1):
     """Count particles outside the grid and, of the rest, those whose cell column along
-    ``axis`` is outside the owned columns [c0, c1). Non-finite positions count as outside."""
+    ``axis`` is outside the owned columns [c0, c1). Non-finite positions count as outside.
+    Also counts particles whose volume is no longer positive (material turned inside out: only
+    a diverging run does that)."""
     outside = 0
     leaving = 0
+    inverted = 0
     for p in range(x.shape[0]):
+        if not vol[p] > 0.0:
+            inverted += 1
         sx = (x[p, 0] - origin[0]) * inv_h
         sy = (x[p, 1] - origin[1]) * inv_h
         if not (0.0 <= sx < ncx and 0.0 <= sy < ncy):
@@ -22,7 +27,7 @@ def count_strays(x, origin, inv_h, ncx, ncy, axis, c0, c1):
         c = int(math.floor(sx if axis == 0 else sy))
         if c < c0 or c >= c1:
             leaving += 1
-    return outside, leaving
+    return outside, leaving, inverted
 
 
 def cell_columns(x, origin, inv_h, axis):

@@ -77,7 +77,7 @@ def test_base_motion_shakes_a_free_standing_block(tmp_path):
 
 
 def test_work_of_the_moving_base_converges_with_the_time_step(tmp_path):
-    """The ground's work (reaction impulses times the node's mean velocity) is a first-order
+    """The ground's work (reaction impulses times the ground velocity) is a first-order
     estimate in dt of the energy the base puts in: the gap to kinetic + internal energy must
     shrink about in proportion to the time step."""
     import dataclasses
