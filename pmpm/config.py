@@ -338,7 +338,7 @@ def _contact(t, bodies):
     if t is None:
         return None
     names = [b.name for b in bodies]
-    listed = t.raw("bodies", names)
+    listed = t.raw("bodies", list(dict.fromkeys(names)))  # default: every body (names once)
     if not isinstance(listed, list) or not listed or not all(isinstance(n, str) for n in listed):
         raise ConfigError(t.path("bodies"), "must be a non-empty list of body names")
     for n in listed:

@@ -34,6 +34,7 @@ class Loads:
         self.gravity = None if config.gravity is None else np.asarray(config.gravity, dtype=np.float64)
         self.forces = config.forces
         self._vec = np.zeros((len(self.forces), 2))
+        self._idx, self._idx_of = None, None
 
     @property
     def has_forces(self):
@@ -68,9 +69,27 @@ class Loads:
         fields["load_id"], fields["load_w"] = load_id, load_w
 
     def kernel_args(self, particles, t):
-        """(gravity, load_id, load_w, load_vec) for the kernels at time ``t``; absent -> None."""
+        """(gravity, load_id, load_w, load_vec) for kernels that take every load in their
+        particle loop (``None`` where absent). The main solver uses :meth:`point_forces`."""
         if not self.forces:
             return self.gravity, None, None, None
+        return self.gravity, particles["load_id"], particles["load_w"], self.vectors(t)
+
+    def vectors(self, t):
+        """(n_sets, 2) total force of every set at time ``t``."""
         for k, f in enumerate(self.forces):
             self._vec[k] = np.asarray(f.force) * evaluate(f.time_function, t)
-        return self.gravity, particles["load_id"], particles["load_w"], self._vec
+        return self._vec
+
+    def point_forces(self, particles, t):
+        """(idx, load_id, load_w, load_vec) of the loaded particles at time ``t``, or None.
+
+        ``idx`` is cached per ``load_id`` array: sorting and migration replace the particle
+        arrays, so a new array object means the indices must be found again."""
+        if not self.forces:
+            return None
+        load_id = particles["load_id"]
+        if self._idx_of is not load_id:
+            self._idx = np.flatnonzero(load_id >= 0).astype(np.int64)
+            self._idx_of = load_id
+        return self._idx, load_id, particles["load_w"], self.vectors(t)

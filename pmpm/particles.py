@@ -82,16 +82,16 @@ class Particles:
         return Particles({k: np.ascontiguousarray(a[index]) for k, a in self.fields.items()})
 
     def reorder(self, order):
-        """Permute every field in place (``order`` is a permutation of 0..n-1), without a second
-        copy of any field: the particle arrays are most of a run's memory."""
-        from .kernels import is_identity, permute_rows
+        """Permute every field (``order`` is a permutation of 0..n-1), one field at a time so
+        that at most one field's worth of memory is in flight (the particle arrays are most of a
+        run's memory). Gathering into a new array streams its writes; following the
+        permutation's cycles in place would save that memory but costs twice the cache misses,
+        and a sort after a few particles changed cell shifts every row behind them."""
+        from .kernels import is_identity
         if is_identity(order):  # the usual case in solids: nobody changed cell since the last sort
             return
-        visited = np.empty(self.n, dtype=np.bool_)
-        for k, a in self.fields.items():
-            a = np.ascontiguousarray(a)
-            permute_rows(a.reshape(self.n, -1).view(np.uint8), order, visited)
-            self.fields[k] = a
+        for k in list(self.fields):
+            self.fields[k] = np.take(self.fields[k], order, axis=0)
 
     @staticmethod
     def concatenate(parts):

@@ -146,9 +146,13 @@ class Solver:
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
         p = self.particles
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
+        gravity = self.loads.gravity if forces else None
         K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
-              gravity, load_id, load_w, load_vec, *self._geometry())
+              gravity, None, None, None, *self._geometry())
+        point = self.loads.point_forces(p, self.t) if forces else None
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *self._geometry())
 
     def exchange_halo(self, fields):
         """HALO: ghost contributions summed into the owners, owners' totals copied back."""
@@ -187,18 +191,26 @@ class Solver:
         de = self._scratch("_de", (p.n, 3))
         dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
         self._de, self._dw = de, dw
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
             p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, velocity_field, self._dx if move else None, dt,
-            gravity, load_id, load_w, load_vec, *self._geometry())
+            self.loads.gravity, None, None, None, *self._geometry())
+        if move:
+            self._point_load_work()
 
     def move_particles(self, dt):
         """Position update x += dt sum N v_i (USF: after the stress update)."""
         p = self.particles
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += K.g2p_kinematics(
             p["x"], p["m"], p["vol"], None, None, None, 1, self._dx, dt,
-            gravity, load_id, load_w, load_vec, *self._geometry())
+            self.loads.gravity, None, None, None, *self._geometry())
+        self._point_load_work()
+
+    def _point_load_work(self):
+        """Work of the set forces over this step's moves (the forces of the step's start)."""
+        point = self.loads.point_forces(self.particles, self.t)
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            self.external_work += K.point_load_work(idx, self._dx, load_id, load_w, load_vec)
 
     def update_stress(self):
         """Stress increments through each material's tangent (eq. 6 / eq. 15)."""

@@ -14,11 +14,12 @@ from .grid_ops import (elastic_energy, grid_update, kinetic_energy, momentum_to_
                        stress_power)
 from .transfer import p2g, g2p_velocity, g2p_kinematics
 from .objective import jaumann_rotate
+from .point_loads import point_load_work, scatter_point_loads
 from .sort import cell_order, is_identity, permute_rows
 from .locate import count_strays, cell_columns
 
 __all__ = ["p2g", "g2p_velocity", "stress_power", "kinetic_energy", "elastic_energy", "g2p_kinematics", "grid_update", "momentum_to_velocity",
-           "jaumann_rotate", "cell_order", "permute_rows", "count_strays", "cell_columns", "N_FIELDS", "MASS", "MOM", "FORCE", "REMAP"]
+           "jaumann_rotate", "scatter_point_loads", "point_load_work", "cell_order", "permute_rows", "count_strays", "cell_columns", "N_FIELDS", "MASS", "MOM", "FORCE", "REMAP"]
 
 N_FIELDS = 7
 MASS, MOM, FORCE, REMAP = 0, 1, 3, 5

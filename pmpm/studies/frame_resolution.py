@@ -13,18 +13,26 @@ peak; a run that yields so much that it never swings back below half its first p
 same rule about its mean level after the peak instead, shown in brackets), particle count,
 steps, wall and CPU time of the stepping loop; per cell size, the permanent drift: the centre of
 oscillation (time mean of ux over the last full period of each run, the period being that run's
-own estimate) of the elastoplastic run minus that of the elastic run.
+own estimate) of the elastoplastic run minus that of the elastic run. Energies are sampled every
+ENERGY_INTERVAL for the plastic work at each sway maximum and the energy balance.
 
 Run (one rank; a shared 2-vCPU machine leaves the other core to other work)::
 
-    python -m pmpm.studies.frame_resolution --cells 0.1 0.05 0.025 --t-end 0.25 0.25 0.1 \
-        --out docs/portal_frame_resolution.json
+    python -m pmpm.studies.frame_resolution --cells 0.1 0.05 0.025 --t-end 0.25 \
+        --out docs/portal_frame_resolution.json --histories /tmp/frame_study/histories.npz
+    python -m pmpm.studies.frame_resolution --analyse /tmp/frame_study/histories.npz
+    python -m pmpm.studies.frame_resolution --estimates
 
 ``--t-end`` takes one value for all cell sizes or one per cell size (a fine grid can run a shorter
 end time that still covers the first peak and two periods, about 0.1 s). The script prints one
 progress line per tenth of each run on stderr, then a Markdown table and, last, one JSON line on
 stdout; the same JSON is written to ``--out`` (rewritten after every run, so a stopped study
-keeps what it finished). ``--histories FILE.npz`` also saves the sampled histories.
+keeps what it finished). ``--histories FILE.npz`` also saves the sampled histories;
+``--analyse FILE.npz`` prints the numbers docs/portal_frame.md derives from them (periods over the
+first 0.1 s, drift over several windows, sway maxima and minima, uy against ux, spectra, energy
+balance), and ``--estimates`` prints the beam model of tests/verification/frame_beam_model.py
+extended step by step with the continuum's effects (clear span, Timoshenko shear, a Krawinkler
+joint-panel spring, the column-stub mass). Neither of the last two runs the MPM or writes a file.
 """
 import argparse
 import dataclasses
@@ -37,7 +45,8 @@ import time
 import numpy as np
 
 __all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main",
-           "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile"]
+           "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile",
+           "analyse_histories", "sway_extrema"]
 
 CASE = os.path.join(os.path.dirname(__file__), "..", "..", "cases", "portal_frame.toml")
 DOMAIN_LO = (-0.5, 0.0)
@@ -389,14 +398,16 @@ def continuum_estimates(cells=(0.1, 0.05, 0.025)):
 
 def estimates_table(est):
     """:func:`continuum_estimates` as Markdown."""
-    lines = ["| model | k (MN/m) | static (mm) | step peak (mm) | at (s) | period (ms) | mode 1 (ms) | panel rotation (mrad) |",
+    lines = ["| model | k (MN/m) | static (mm) | step peak (mm) | at (s) | period (ms) | mode 1 (ms) "
+             "| panel rotation (mrad) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in est["models"]:
         gamma = f"{r['panel_rotation_mrad']:.2f}" if "panel_rotation_mrad" in r else ""
         lines.append(f"| {r['model']} | {r['k_N_per_m'] / 1e6:.2f} | {r['static_mm']:.2f} | {r['peak_mm']:.2f} "
                      f"| {r['t_peak_s']:.4f} | {r['period_ms']:.1f} | {r['mode1_ms']:.1f} | {gamma} |")
     lines.append("")
-    lines.append("| cell (m) | rows across column / beam | web thickness / tw, column / beam | shear area column / beam (m^2) |")
+    lines.append("| cell (m) | rows across column / beam | web thickness / tw, column / beam "
+                 "| shear area column / beam (m^2) |")
     lines.append("|---|---|---|---|")
     for h, s in est["strips"].items():
         lines.append(f"| {h:g} | {s['column_rows']} / {s['beam_rows']} | {s['column_web_over_tw']:.2f} / "
@@ -404,8 +415,9 @@ def estimates_table(est):
     sec = est["sections"]
     lines.append("")
     lines.append(f"G = {sec['G_Pa'] / 1e9:.1f} GPa; web areas d tw: column {sec['column_d_tw_m2']:.3e}, beam "
-                 f"{sec['beam_d_tw_m2']:.3e} m^2 (energy shear areas of the idealised shapes {sec['column_shear_area_m2']:.3e}, "
-                 f"{sec['beam_shear_area_m2']:.3e}); panel G d_c t_w d_b = {sec['panel_stiffness_Nm_per_rad']:.3e} N m/rad "
+                 f"{sec['beam_d_tw_m2']:.3e} m^2 (energy shear areas of the idealised shapes "
+                 f"{sec['column_shear_area_m2']:.3e}, {sec['beam_shear_area_m2']:.3e}); panel G d_c t_w d_b = "
+                 f"{sec['panel_stiffness_Nm_per_rad']:.3e} N m/rad "
                  f"against the beam end's 6 E I_b / L = {sec['beam_end_stiffness_6EI_L']:.3e}; hand estimate of column "
                  f"shear sway (P/2) h / (G d tw) = {sec['column_shear_hand_mm']:.2f} mm static")
     return "\n".join(lines)
@@ -524,6 +536,80 @@ def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stder
     return result
 
 
+def _spectral_periods(t, u, count):
+    """Periods (ms) of the ``count`` strongest spectral peaks of ``u`` (resampled uniformly, mean
+    removed, Hann window); peaks closer than 8 Hz to a stronger one are skipped."""
+    dt = float(np.median(np.diff(t)))
+    tu = np.arange(0.0, t[-1], dt)
+    y = np.interp(tu, t, u)
+    y = (y - y.mean()) * np.hanning(len(y))
+    amp = np.abs(np.fft.rfft(y))
+    freq = np.fft.rfftfreq(len(y), dt)
+    found = []
+    for i in np.argsort(amp)[::-1]:
+        if 1 < i < len(amp) - 1 and amp[i] >= amp[i - 1] and amp[i] >= amp[i + 1] \
+                and all(abs(freq[i] - f) > 8.0 for f in found):
+            found.append(freq[i])
+            if len(found) == count:
+                break
+    return [round(1e3 / float(f), 2) for f in found]
+
+
+def analyse_histories(path, early=0.1):
+    """Derived numbers of docs/portal_frame.md from a ``--histories`` file: the test's estimator on
+    the first ``early`` s, the drift over several windows, the sway maxima and minima, uy extremes
+    and spectra, and the energy balance kinetic + strain + plastic work - external work."""
+    d = np.load(path)
+    cells = sorted({float(k.split("_")[0][1:]) for k in d.files}, reverse=True)
+    out = {}
+    for h in cells:
+        key = f"h{h:g}"
+        runs = {v: {f: d[f"{key}_{v}_{f}"] for f in ("t", "ux", "uy", "te", "kinetic", "strain", "plastic",
+                                                       "external")}
+                for v in VARIANTS if f"{key}_{v}_t" in d.files}
+        res = {}
+        for v, r in runs.items():
+            t, u = r["t"], r["ux"]
+            m = t <= early + 1e-9
+            pk, tp, per = peak_and_period(t[m], u[m])
+            tmax, tmin = sway_extrema(t, u, tp)
+            gap = r["kinetic"] + r["strain"] + r["plastic"] - r["external"]
+            # uy against ux: linear (axial force from the beam's end shear) plus quadratic (the arc
+            # shortening of a swaying column, -0.6 ux^2 / h for a double-curvature shape)
+            basis = np.column_stack([u, u * u])
+            (lin, quad), *_ = np.linalg.lstsq(basis, r["uy"], rcond=None)
+            resid = r["uy"] - basis @ (lin, quad)
+            res[v] = {f"period_first_{early:g}s_ms": round(per * 1e3, 2) if math.isfinite(per) else None,
+                      "sway_maxima_mm": [round(float(np.interp(x, t, u)) * 1e3, 1) for x in tmax],
+                      "sway_minima_mm": [round(float(np.interp(x, t, u)) * 1e3, 1) for x in tmin],
+                      "uy_min_mm": round(float(r["uy"].min()) * 1e3, 3),
+                      "uy_max_mm": round(float(r["uy"].max()) * 1e3, 3),
+                      "uy_mean_mm": round(float(r["uy"].mean()) * 1e3, 3),
+                      "uy_fit_linear": round(float(lin), 5), "uy_fit_quadratic_per_m": round(float(quad), 4),
+                      "uy_fit_residual_rms_mm": round(float(np.sqrt(np.mean(resid ** 2))) * 1e3, 4),
+                      "uy_rms_about_mean_mm": round(float(np.std(r["uy"])) * 1e3, 4),
+                      "uy_spectral_periods_ms": _spectral_periods(t, r["uy"], 6),
+                      "ux_spectral_periods_ms": _spectral_periods(t, u, 4),
+                      "energy_gap_end_J": round(float(gap[-1]), 1),
+                      "energy_gap_end_over_final_work": round(float(gap[-1] / r["external"][-1]), 5),
+                      "energy_gap_max_over_max_work": round(float(np.abs(gap).max() / r["external"].max()), 5)}
+        if len(runs) == 2:
+            el, ep = runs["elastic"], runs["elastoplastic"]
+            end = float(min(el["t"][-1], ep["t"][-1]))
+            windows = {f"test window ({early - 0.04:g}, {early:g}] s": (early - 0.04, early),
+                       f"last 40 ms ({end - 0.04:g}, {end:g}] s": (end - 0.04, end),
+                       f"last 80 ms ({end - 0.08:g}, {end:g}] s": (end - 0.08, end),
+                       f"(0.05, {end:g}] s": (0.05, end)}
+            drift = {}
+            for name, (lo, hi) in windows.items():
+                me = (el["t"] > lo) & (el["t"] <= hi + 1e-9)
+                mp = (ep["t"] > lo) & (ep["t"] <= hi + 1e-9)
+                drift[name] = round(float(ep["ux"][mp].mean() - el["ux"][me].mean()) * 1e3, 2)
+            res["drift_mm_by_window"] = drift
+        out[key] = res
+    return out
+
+
 def _write(path, result):
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = path + ".tmp"
@@ -543,7 +629,17 @@ def main(argv=None):
     ap.add_argument("--no-reference", action="store_true", help="skip the beam-model reference")
     ap.add_argument("--estimates", action="store_true",
                     help="print only the beam-model estimates of the continuum effects (no MPM run, nothing written)")
+    ap.add_argument("--analyse", metavar="HISTORIES.npz", default=None,
+                    help="print only the numbers derived from a --histories file (no MPM run, nothing written)")
     args = ap.parse_args(argv)
+    if args.analyse:
+        res = analyse_histories(args.analyse)
+        for key, runs in res.items():
+            print(f"## {key[1:]} m")
+            for name, vals in runs.items():
+                print(f"- {name}: " + "; ".join(f"{k} {v}" for k, v in vals.items()))
+        print(json.dumps(res, separators=(",", ":")))
+        return 0
     if args.estimates:
         est = continuum_estimates(args.cells)
         print(estimates_table(est))
