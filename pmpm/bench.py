@@ -84,6 +84,18 @@ def warm_kernels(verbose=False):
                     s.step()
                 if verbose:
                     print(f"warm: {shape} {scheme} loads={loads}")
+    # the shipped cases' extra specialisations: plasticity, and multi-field contact
+    from .config import load_scene
+    from .contact import ContactSolver
+    import os
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for solver_class, case, variant in ((Solver, "portal_frame.toml", "elastoplastic"),
+                                        (ContactSolver, "disks_contact.toml", None)):
+        path = os.path.join(root, "cases", case)
+        if os.path.exists(path):
+            s = solver_class(load_scene(path, variant)[0], MPI.COMM_SELF)
+            for _ in range(2):
+                s.step()
 
 
 @nb.njit(cache=True)

@@ -177,6 +177,8 @@ class Run:
             out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
         if s.ground is not None:
             out.append(s.ground.describe())
+        if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
+            out.append(s.describe())
         return out
 
     def execute(self):

@@ -6,7 +6,6 @@ separate freely where one velocity field glues them, and a block sliding on a se
 Coulomb friction against g (sin theta - mu cos theta). The same answer on several ranks is in
 tests/mpi/test_contact_mpi.py.
 """
-import dataclasses
 import math
 
 import numpy as np
@@ -277,7 +276,7 @@ def test_sliding_block_accelerates_at_g_sin_minus_mu_cos(mu, theta, tol):
 def test_block_sticks_above_tan_theta(mu, theta):
     """Above tan(theta) friction holds the block: after settling it moves less than 1% of what
     it would slide without friction (g sin theta / 2 (0.4^2 - 0.1^2) = 0.375 m at 30 degrees;
-    measured 0.2 mm)."""
+    measured 1.3 mm, 0.4%: the elastic slab shears a little under the block)."""
     r = _slide(mu, theta)
     t1 = np.searchsorted(r[:, 0], 0.1)
     moved = abs(r[-1, 2] - r[t1, 2])
