@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["Material", "Params", "FORMULATIONS"]
+__all__ = ["Material", "KinematicHardening", "Params", "FORMULATIONS"]
 logger = logging.getLogger(__name__)
 
 FORMULATIONS = ("plane_stress", "plane_strain")
@@ -138,3 +138,22 @@ class Material:
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
         raise NotImplementedError
+
+
+class KinematicHardening(Material):
+    """Shared part of the von Mises models with Ziegler kinematic hardening: the plastic state
+    every particle carries and the two parameters they all read (not a material by itself)."""
+
+    state_fields = {"back_stress": (4,), "eps_p": (3,), "eps_p_eq": (), "plastic_work": ()}
+    tensor_state_fields = ("back_stress",)
+
+    def read_params(self, p):
+        """Read ``yield_stress`` and ``hardening``.
+
+        Parameters
+        ----------
+        p : Params
+        """
+        self.yield_stress = p.number("yield_stress", low=0.0, low_open=True)
+        # required: a silent default of 0 (perfect plasticity) would change results without notice
+        self.hardening = p.number("hardening", low=0.0, high=1.0, high_open=True)

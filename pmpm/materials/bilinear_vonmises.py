@@ -41,7 +41,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .base import Material
+from .base import KinematicHardening
 from .linear_elastic import elastic_increment
 
 __all__ = ["BilinearVonMises"]
@@ -142,7 +142,7 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
         eps_eq[p] += dl
 
 
-class BilinearVonMises(Material):
+class BilinearVonMises(KinematicHardening):
     """Von Mises plasticity with linear (Ziegler) kinematic hardening, by return mapping.
 
     TOML keys besides ``E``, ``nu``, ``density``: ``yield_stress`` (> 0) and ``hardening``
@@ -151,9 +151,6 @@ class BilinearVonMises(Material):
     """
 
     name = "bilinear_vonmises"
-    state_fields = {"back_stress": (4,), "eps_p": (3,), "eps_p_eq": (), "plastic_work": ()}
-    tensor_state_fields = ("back_stress",)
-
     def read_params(self, p):
         """Read ``yield_stress`` and ``hardening``.
 
@@ -161,9 +158,7 @@ class BilinearVonMises(Material):
         ----------
         p : Params
         """
-        self.yield_stress = p.number("yield_stress", low=0.0, low_open=True)
-        # required: a silent default of 0 (perfect plasticity) would change results without notice
-        self.hardening = p.number("hardening", low=0.0, high=1.0, high_open=True)
+        super().read_params(p)
 
     @property
     def params(self):

@@ -71,7 +71,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .base import Material
+from .base import KinematicHardening
 from .linear_elastic import elastic_increment
 
 __all__ = ["SmoothVonMises", "smooth_rate"]
@@ -292,7 +292,7 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             work[p] += w
 
 
-class SmoothVonMises(Material):
+class SmoothVonMises(KinematicHardening):
     """The paper's smooth von Mises plasticity with Ziegler kinematic hardening.
 
     TOML keys besides ``E``, ``nu``, ``density``: ``yield_stress`` (> 0), ``hardening``
@@ -302,9 +302,6 @@ class SmoothVonMises(Material):
     """
 
     name = "smooth_vonmises"
-    state_fields = {"back_stress": (4,), "eps_p": (3,), "eps_p_eq": (), "plastic_work": ()}
-    tensor_state_fields = ("back_stress",)
-
     def read_params(self, p):
         """Read ``yield_stress``, ``hardening`` and ``smoothness``.
 
@@ -312,9 +309,7 @@ class SmoothVonMises(Material):
         ----------
         p : Params
         """
-        self.yield_stress = p.number("yield_stress", low=0.0, low_open=True)
-        # required: a silent default of 0 (perfect plasticity) would change results without notice
-        self.hardening = p.number("hardening", low=0.0, high=1.0, high_open=True)
+        super().read_params(p)
         # sub-steps shrink like 1/N, so a huge N would quietly multiply the cost; the bilinear
         # model is the N -> infinity limit and costs nothing extra
         self.smoothness = p.number("smoothness", default=10.0, low=0.0, high=_MAX_SMOOTHNESS,
