@@ -19,13 +19,14 @@ Two problems, each run in-process on one rank (``Solver(scene, MPI.COMM_SELF)``)
   |peak - peak_ref| / peak_ref against the finest run (cubic, MUSL, 2 x 2 particles per cell,
   the finest cell size of the sweep).
 
-Every run varies one of: the shape function (linear, quadratic, cubic B-spline), particles per
-cell per axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL); CFL 0.5 throughout.
+The sweep varies the shape function (linear, quadratic, cubic B-spline), particles per cell per
+axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL); CFL 0.5 throughout.
 The bar is a full factorial (it is cheap). The frame is not (the finest runs take many minutes
 each): every shape at every cell size with 2 x 2 particles and MUSL; the full factorial over
 particles per cell and scheme at 0.05 m; particles per cell and scheme varied one at a time at
 0.1 m and 0.025 m. The I-section strips need enough particle rows across a member's depth, so
-1 particle per cell is refused at 0.1 m (recorded as such, not run).
+1 particle per cell is refused at 0.1 m; runs that diverge (the solver's energy check) are
+recorded as such.
 
 Wall time is that of the stepping loop only (time.perf_counter around ``solver.step()``; set-up,
 sampling and error evaluation excluded) after a warm-up that compiles every kernel the sweep
@@ -37,14 +38,17 @@ time per problem with the Pareto front (no other run both faster and more accura
 (``accuracy.png``), the observed convergence order of each shape function (least-squares slope
 of log error against log cell size over the finest ORDER_POINTS cell sizes of the bar, MUSL,
 2 x 2 particles; the frame's orders are printed too, for information), the equal-wall-time
-comparison of cubic against linear B-splines on the frame, and the cheapest setting for 10%,
-1% and 0.1% error on the frame's first peak (a setting qualifies when its run and every finer
-run of the same shape, particles per cell and scheme meet the target, so a lucky cancellation
-at one cell size does not count). The last line printed is one JSON object.
+comparison of cubic against linear B-splines (frame and bar), and the cheapest setting for 10%,
+1% and 0.1% error on the frame's first peak, overall and per shape function (a setting qualifies
+when its run, and every finer run of the same shape, particles per cell and scheme, of which
+there must be at least one besides the reference, meet the target: a lucky cancellation at one
+cell size does not count). The last line printed is one JSON object.
 
-``--quick`` (a test's budget, about two minutes here): the bar with MUSL and 2 x 2 particles at
-10 ... 160 cells for the three shapes, and the frame at 0.1 and 0.05 m for the three shapes
-against a cubic 0.025 m reference.
+``--quick`` (a test's budget: one minute on this 2-vCPU machine when idle, two when shared): the
+bar with MUSL and 2 x 2 particles at 10 ... 160 cells for the three shapes, and the frame at 0.1
+and 0.05 m for the three shapes against a cubic 0.025 m reference. ``--clock cpu`` analyses CPU
+instead of wall time; ``--from-csv FILE`` redoes the analysis of an earlier accuracy.csv without
+running anything. Results and recommendations: docs/accuracy.md.
 """
 import csv
 import dataclasses
@@ -86,6 +90,8 @@ REFERENCE = {"shape": "cubic", "ppc": 2, "scheme": "musl"}   # at the finest cel
 
 #: orders: fit over this many of the finest cell sizes (two halvings)
 ORDER_POINTS = 3
+#: the two clocks each run records
+CLOCKS = {"wall_s": "wall time", "cpu_s": "CPU time"}
 #: error targets of the recommendations (frame, first peak)
 TARGETS = (0.10, 0.01, 0.001)
 
@@ -316,66 +322,71 @@ def convergence_orders(rows, problem="bar", points=ORDER_POINTS):
     return out
 
 
-def pareto_front(rows):
-    """Mark ``pareto`` on each run of each problem: no other run is both at most as slow and at
-    most as wrong (and better in one)."""
+def pareto_front(rows, clock="wall_s"):
+    """Mark ``pareto`` on each run of each problem: no other run is both at most as slow (by
+    ``clock``, "wall_s" or "cpu_s") and at most as wrong (and better in one)."""
     for problem in ("bar", "frame"):
         pts = [r for r in rows if r["problem"] == problem and r["status"] == "ok" and r.get("error")]
         best = math.inf
-        for r in sorted(pts, key=lambda r: (r["wall_s"], r["error"])):
+        for r in sorted(pts, key=lambda r: (r[clock], r["error"])):
             r["pareto"] = r["error"] < best
             best = min(best, r["error"])
     return rows
 
 
-def _loglog_interp(series, t):
-    """log-log interpolation of error at wall time ``t`` along a series (sorted by time)."""
-    lt = np.log([r["wall_s"] for r in series])
+def _loglog_interp(series, t, clock="wall_s"):
+    """log-log interpolation of error at time ``t`` along a series."""
+    lt = np.log([r[clock] for r in series])
     le = np.log([r["error"] for r in series])
     order = np.argsort(lt)
     return float(np.exp(np.interp(math.log(t), lt[order], le[order])))
 
 
-def equal_time_comparison(rows, problem="frame", a="cubic", b="linear", n=9):
-    """Error of ``a`` and ``b`` (MUSL, 2 x 2 particles, refined over cell size) at common wall
-    times: ``n`` log-spaced times over the overlap of their wall-time ranges."""
+def equal_time_comparison(rows, problem="frame", a="cubic", b="linear", n=9, clock="wall_s"):
+    """Error of ``a`` and ``b`` (MUSL, 2 x 2 particles, refined over cell size) at common times:
+    ``n`` log-spaced times over the overlap of their time ranges. ``holds``: ``a`` at least as
+    accurate at all of them; ``holds_from_s``: the first of them from which on it is."""
     sa, sb = _series(rows, problem, a), _series(rows, problem, b)
     if len(sa) < 2 or len(sb) < 2:
         return None
-    lo = max(min(r["wall_s"] for r in sa), min(r["wall_s"] for r in sb))
-    hi = min(max(r["wall_s"] for r in sa), max(r["wall_s"] for r in sb))
+    lo = max(min(r[clock] for r in sa), min(r[clock] for r in sb))
+    hi = min(max(r[clock] for r in sa), max(r[clock] for r in sb))
     if hi <= lo:
-        return {"problem": problem, "overlap_s": None, "times_s": [], "ratio": [], "holds": None}
+        return {"problem": problem, "clock": clock, "overlap_s": None, "times_s": [], "ratio": [], "holds": None}
     times = np.geomspace(lo, hi, n)
-    ea = [_loglog_interp(sa, t) for t in times]
-    eb = [_loglog_interp(sb, t) for t in times]
+    ea = [_loglog_interp(sa, t, clock) for t in times]
+    eb = [_loglog_interp(sb, t, clock) for t in times]
     ok = [x <= y for x, y in zip(ea, eb)]
     since = next((t for k, t in enumerate(times) if all(ok[k:])), None)
-    return {"problem": problem, "shapes": [a, b], "overlap_s": [lo, hi], "times_s": times.tolist(),
+    return {"problem": problem, "clock": clock, "shapes": [a, b], "overlap_s": [lo, hi], "times_s": times.tolist(),
             f"error_{a}": ea, f"error_{b}": eb, "ratio": [x / y for x, y in zip(ea, eb)],
             "holds": all(ok), "holds_from_s": None if since is None else float(since)}
 
 
-def recommendations(rows, targets=TARGETS):
-    """Cheapest frame setting per error target. A setting (shape, ppc, scheme, cell size)
-    qualifies when its run and every finer run of the same shape, ppc and scheme meet the target;
-    the reference run (error 0 by construction) does not count."""
+def _qualifying(frame, target):
+    """Frame runs that meet ``target`` and stay within it under refinement: the same shape, ppc
+    and scheme was also run on a finer grid (the reference, exact by construction, does not
+    count) and every such finer run meets it too. One run alone can meet a target by a lucky
+    cancellation (linear B-splines pass the reference on their way to a 10% error)."""
+    out = []
+    for r in frame:
+        finer = [q for q in frame if (q["shape"], q["ppc"], q["scheme"]) == (r["shape"], r["ppc"], r["scheme"])
+                 and q["cell_size"] < r["cell_size"]]
+        if finer and r["error"] <= target and all(q["error"] <= target for q in finer):
+            out.append(r)
+    return out
+
+
+def recommendations(rows, targets=TARGETS, clock="wall_s", shape=None):
+    """Cheapest (by ``clock``) qualifying frame setting per error target (see _qualifying),
+    optionally of one ``shape``; None where no setting qualifies."""
     frame = [r for r in rows if r["problem"] == "frame" and r["status"] == "ok"]
     out = {}
     for target in targets:
-        ok = []
-        for r in frame:
-            finer = [q for q in frame if (q["shape"], q["ppc"], q["scheme"]) == (r["shape"], r["ppc"], r["scheme"])
-                     and q["cell_size"] <= r["cell_size"]]
-            if all(q["error"] <= target for q in finer):
-                ok.append(r)
-        key = f"{target:g}"
-        if ok:
-            r = min(ok, key=lambda r: r["wall_s"])
-            out[key] = {k: r[k] for k in ("shape", "ppc", "scheme", "cell_size", "error", "wall_s",
-                                          "cpu_s", "particles", "steps")}
-        else:
-            out[key] = None
+        ok = [r for r in _qualifying(frame, target) if shape is None or r["shape"] == shape]
+        r = min(ok, key=lambda r: r[clock]) if ok else None
+        out[f"{target:g}"] = None if r is None else {
+            k: r[k] for k in ("shape", "ppc", "scheme", "cell_size", "error", "wall_s", "cpu_s", "particles", "steps")}
     return out
 
 
@@ -454,21 +465,30 @@ def write_markdown(rows, summary, path):
         lines += ["", "Frame (first peak against the reference, MUSL, 2 x 2 particles per cell), for information:", ""]
         for shape, o in summary["frame_orders"].items():
             lines.append(f"- {shape}: {o['order']:.2f} (cell sizes {', '.join(f'{h:.4g}' for h in o['cell_sizes'])})")
-    cmp_ = summary.get("equal_time")
-    if cmp_ and cmp_.get("overlap_s"):
-        lines += ["", f"## Cubic against linear at equal wall time ({cmp_['problem']})", "",
-                  "| wall (s) | error cubic | error linear | ratio |", "|---|---|---|---|"]
-        for t, a, b, q in zip(cmp_["times_s"], cmp_["error_cubic"], cmp_["error_linear"], cmp_["ratio"]):
-            lines.append(f"| {t:.2f} | {a:.3g} | {b:.3g} | {q:.2f} |")
+    clock = CLOCKS[summary["clock"]]
+    for name in ("equal_time", "equal_time_bar"):
+        cmp_ = summary.get(name)
+        if cmp_ and cmp_.get("overlap_s"):
+            lines += ["", f"## Cubic against linear at equal {clock} ({cmp_['problem']}, MUSL, 2 x 2 particles "
+                          "per cell, log-log interpolation along the cell-size refinement)", "",
+                      f"| {clock} (s) | error cubic | error linear | cubic / linear |", "|---|---|---|---|"]
+            for t, a, b, q in zip(cmp_["times_s"], cmp_["error_cubic"], cmp_["error_linear"], cmp_["ratio"]):
+                lines.append(f"| {t:.3g} | {a:.3g} | {b:.3g} | {q:.2f} |")
     if summary.get("recommendations"):
-        lines += ["", "## Cheapest setting per error target (frame, first peak)", "",
-                  "| target | shape | ppc | scheme | cell (m) | error | wall (s) |", "|---|---|---|---|---|---|---|"]
-        for key, r in summary["recommendations"].items():
-            if r is None:
-                lines.append(f"| {float(key):.1%} | none of the runs | | | | | |")
-            else:
-                lines.append(f"| {float(key):.1%} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:g} "
-                             f"| {r['error']:.2%} | {r['wall_s']:.1f} |")
+        lines += ["", f"## Cheapest setting per error target (frame, first peak, by {clock})", "",
+                  "A setting counts when it and every finer run of the same shape, ppc and scheme (at least "
+                  "one, the reference excluded) meet the target.", "",
+                  "| target | shape | ppc | scheme | cell (m) | error | wall (s) | CPU (s) |",
+                  "|---|---|---|---|---|---|---|---|"]
+        groups = [("any", summary["recommendations"])] + list(summary.get("recommendations_by_shape", {}).items())
+        for label, recs in groups:
+            for key, r in recs.items():
+                head = f"{float(key):.1%}" + ("" if label == "any" else f" ({label} only)")
+                if r is None:
+                    lines.append(f"| {head} | none qualifies | | | | | | |")
+                else:
+                    lines.append(f"| {head} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:g} "
+                                 f"| {r['error']:.3%} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} |")
     if summary.get("reference"):
         ref = summary["reference"]
         lines += ["", f"Frame reference: {ref['shape']}, {ref['ppc']} x {ref['ppc']} particles per cell, "
@@ -482,7 +502,7 @@ def write_markdown(rows, summary, path):
         fh.write("\n".join(lines))
 
 
-def write_plot(rows, path):
+def write_plot(rows, path, clock="wall_s"):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -494,27 +514,33 @@ def write_plot(rows, path):
     for ax, problem in zip(axes[0], problems):
         pts = [r for r in rows if r["problem"] == problem and r["status"] == "ok" and r.get("error")]
         for r in pts:
-            ax.scatter(r["wall_s"], r["error"], c=colors[r["shape"]], marker=markers[r["scheme"]],
+            ax.scatter(r[clock], r["error"], c=colors[r["shape"]], marker=markers[r["scheme"]],
                        s=sizes.get(r["ppc"], 40), alpha=0.75, edgecolors="none")
         for shape in SHAPES:   # the cell-size refinement of MUSL, 2 x 2
-            s = sorted(_series(rows, problem, shape), key=lambda r: r["wall_s"])
+            s = sorted(_series(rows, problem, shape), key=lambda r: r[clock])
             if s:
-                ax.plot([r["wall_s"] for r in s], [r["error"] for r in s], "-", color=colors[shape], lw=1, alpha=0.6)
-        front = sorted([r for r in pts if r.get("pareto")], key=lambda r: r["wall_s"])
+                ax.plot([r[clock] for r in s], [r["error"] for r in s], "-", color=colors[shape], lw=1, alpha=0.6)
+        front = sorted([r for r in pts if r.get("pareto")], key=lambda r: r[clock])
         if front:
-            xs, ys = [front[0]["wall_s"]], [front[0]["error"]]
+            xs, ys = [front[0][clock]], [front[0]["error"]]
             for r in front[1:]:
-                xs += [r["wall_s"], r["wall_s"]]
+                xs += [r[clock], r[clock]]
                 ys += [ys[-1], r["error"]]
             ax.plot(xs, ys, "k--", lw=1.2, label="Pareto front")
-            ax.scatter([r["wall_s"] for r in front], [r["error"] for r in front], s=140, facecolors="none",
+            ax.scatter([r[clock] for r in front], [r["error"] for r in front], s=140, facecolors="none",
                        edgecolors="k", linewidths=1.2)
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("wall time of the stepping (s, one core)")
+        ax.set_xlabel(f"{CLOCKS[clock]} of the stepping (s, one rank)")
         ax.set_ylabel("max |u - u_exact| / amplitude" if problem == "bar" else "|peak - peak_ref| / peak_ref")
-        ax.set_title("axial bar, one period (exact solution)" if problem == "bar"
-                     else "elastic portal frame, first peak (finest run)")
+        if problem == "bar":
+            ax.set_title("axial bar, one period, against the exact solution")
+        else:
+            ref = [r for r in rows if r["problem"] == "frame" and r["status"] == "reference"]
+            ax.set_title("elastic portal frame, first peak, against the finest run"
+                         + (f"\n(reference {ref[0]['shape']}, {ref[0]['ppc']}x{ref[0]['ppc']} ppc, "
+                            f"{ref[0]['scheme'].upper()}, {ref[0]['cell_size']:g} m: not shown)" if ref else ""),
+                         fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         from matplotlib.lines import Line2D
         handles = [Line2D([], [], color=c, marker="o", ls="-", label=k) for k, c in colors.items()]
@@ -536,6 +562,8 @@ def add_arguments(p):
     p.add_argument("--outdir", default="accuracy_results", help="directory for accuracy.csv/.md/.png")
     p.add_argument("--from-csv", metavar="CSV", default=None,
                    help="run nothing: redo the analysis and the files from an earlier accuracy.csv")
+    p.add_argument("--clock", choices=["wall", "cpu"], default="wall",
+                   help="time axis of the analysis: wall (default) or CPU time of the stepping")
 
 
 def read_csv(path):
@@ -559,7 +587,8 @@ def read_csv(path):
     return rows
 
 
-def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None, from_csv=None):
+def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None, from_csv=None,
+          clock="wall_s"):
     """Run the sweep, write the files, print the figures; returns the summary dict (the JSON)."""
     t_study = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
@@ -568,7 +597,7 @@ def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout
         rows = read_csv(from_csv)
     else:
         rows = _sweep(plan(quick), csv_path, log)
-    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command)
+    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command, clock)
 
 
 def _sweep(runs, csv_path, log):
@@ -598,18 +627,20 @@ def _sweep(runs, csv_path, log):
     return rows
 
 
-def _report(rows, quick, outdir, csv_path, t_study, out, command):
+def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s"):
     ref = attach_frame_errors(rows)
-    pareto_front(rows)
+    pareto_front(rows, clock)
     orders = convergence_orders(rows, "bar")
     summary = {
         "command": command or "pmpm bench accuracy" + (" --quick" if quick else "") + f" --outdir {outdir}",
         "quick": quick, "study_wall_s": None if t_study is None else time.perf_counter() - t_study,
-        "runs": len(rows),
+        "runs": len(rows), "clock": clock,
         "orders": orders, "frame_orders": convergence_orders(rows, "frame") if ref else {},
-        "equal_time": equal_time_comparison(rows, "frame") if ref else None,
-        "equal_time_bar": equal_time_comparison(rows, "bar"),
-        "recommendations": recommendations(rows) if ref else {},
+        "equal_time": equal_time_comparison(rows, "frame", clock=clock) if ref else None,
+        "equal_time_bar": equal_time_comparison(rows, "bar", clock=clock),
+        "recommendations": recommendations(rows, clock=clock) if ref else {},
+        "recommendations_by_shape": ({shape: recommendations(rows, clock=clock, shape=shape) for shape in SHAPES}
+                                     if ref else {}),
         "reference": ({k: ref[k] for k in ("shape", "ppc", "scheme", "cell_size", "peak_mm", "wall_s")}
                       if ref else None),
         "reference_self_error": reference_self_error(rows, ref),
@@ -617,7 +648,7 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command):
     }
     write_csv(rows, csv_path)
     write_markdown(rows, summary, summary["files"]["md"])
-    write_plot(rows, summary["files"]["png"])
+    write_plot(rows, summary["files"]["png"], clock)
     print(markdown_table(rows), file=out)
     print("", file=out)
     for shape, o in orders.items():
@@ -629,17 +660,18 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command):
         c = summary[name]
         if c and c.get("overlap_s"):
             lo, hi = c["overlap_s"]
-            print(f"cubic vs linear at equal wall time ({c['problem']}, {lo:.2f}-{hi:.2f} s): "
+            print(f"cubic vs linear at equal {CLOCKS[clock]} ({c['problem']}, {lo:.3g}-{hi:.3g} s): "
                   f"error ratio cubic/linear {min(c['ratio']):.2f}-{max(c['ratio']):.2f}, "
                   f"cubic at least as accurate: {c['holds']}"
                   + ("" if c["holds"] or c["holds_from_s"] is None else f" (from {c['holds_from_s']:.2f} s on)"),
                   file=out)
     for key, r in summary["recommendations"].items():
         if r is None:
-            print(f"{float(key):.1%} on the frame's first peak: no run below the reference reaches it", file=out)
+            print(f"{float(key):.1%} on the frame's first peak: no setting qualifies", file=out)
         else:
             print(f"{float(key):.1%} on the frame's first peak: {r['shape']}, {r['ppc']}x{r['ppc']} ppc, "
-                  f"{r['scheme'].upper()}, h = {r['cell_size']:g} m ({r['error']:.2%}, {r['wall_s']:.1f} s)", file=out)
+                  f"{r['scheme'].upper()}, h = {r['cell_size']:g} m ({r['error']:.3%}, wall {r['wall_s']:.1f} s, "
+                  f"CPU {r['cpu_s']:.1f} s)", file=out)
     took = "" if summary["study_wall_s"] is None else f"study wall time {summary['study_wall_s']:.0f} s; "
     print(f"{took}wrote {', '.join(summary['files'].values())}", file=out)
     print(json.dumps(_jsonable(summary), separators=(",", ":")), file=out)
@@ -668,5 +700,5 @@ def accuracy(args):
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:
         command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()
-    study(args.quick, args.outdir, command=command, from_csv=args.from_csv)
+    study(args.quick, args.outdir, command=command, from_csv=args.from_csv, clock=args.clock + "_s")
     return 0
