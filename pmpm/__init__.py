@@ -10,6 +10,11 @@ __version__ = "0.1.0"
 
 __all__ = ["__version__", "load_scene", "Solver", "Run"]
 
+from .jitcache import check_cache as _check_cache  # noqa: E402
+
+# before any kernel loads from numba's cache: a stale entry would run old code (pmpm/jitcache.py)
+_check_cache()
+
 
 def __getattr__(name):
     # lazy: `pmpm --help` and scene validation must not pay for numba compilation

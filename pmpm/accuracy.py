@@ -431,7 +431,10 @@ def _short_status(status):
         return f"refused ({m.group(1)} particle rows across a member)"
     m = re.search(r"diverged at t = ([0-9.eE+-]+) s", status)
     if m:
-        return f"diverged at t = {float(m.group(1)):.4f} s"
+        return f"diverged at t = {float(m.group(1)):.3g} s"
+    m = re.search(r"non-finite velocity or inverted volume at t = ([0-9.eE+-]+) s", status)
+    if m:
+        return f"unstable at t = {float(m.group(1)):.3g} s"
     return status[:60]
 
 
@@ -558,7 +561,7 @@ def write_plot(rows, path, clock="wall_s"):
 
 def add_arguments(p):
     """Options of ``pmpm bench accuracy``."""
-    p.add_argument("--quick", action="store_true", help="reduced sweep (about two minutes)")
+    p.add_argument("--quick", action="store_true", help="reduced sweep (one to two minutes, for the test)")
     p.add_argument("--outdir", default="accuracy_results", help="directory for accuracy.csv/.md/.png")
     p.add_argument("--from-csv", metavar="CSV", default=None,
                    help="run nothing: redo the analysis and the files from an earlier accuracy.csv")

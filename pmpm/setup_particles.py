@@ -35,7 +35,8 @@ def place_points(scene, grid, materials, labels):
 
 def create_particles(points, keep, materials, optional=()):
     """The full particle state of the points selected by ``keep`` (a boolean mask): core
-    fields, material state, and the global id (the point's index in the scene). Only the
+    fields, material state (a diagnostic field only when in ``optional``, the fields the
+    output asks for), and the global id (the point's index in the scene). Only the
     owned points get full fields, so no rank ever holds the whole scene's state."""
     idx = np.nonzero(keep)[0]
     n = len(idx)
@@ -46,11 +47,13 @@ def create_particles(points, keep, materials, optional=()):
     fields["id"][...] = idx
     particles = Particles(fields)
     for name in optional:
-        shape, dtype = OPTIONAL_FIELDS[name]
-        particles.add_field(name, shape, dtype)
+        if name in OPTIONAL_FIELDS:
+            shape, dtype = OPTIONAL_FIELDS[name]
+            particles.add_field(name, shape, dtype)
     for material in materials:
         for name, shape in material.state_fields.items():
-            particles.add_field(name, shape)
+            if name not in material.diagnostic_fields or name in optional:
+                particles.add_field(name, shape)
     return particles
 
 

@@ -23,10 +23,11 @@ is 1, 2 and 2 node columns (a particle in cell c touches nodes c-1 .. c+2 at mos
 import math
 
 import numba as nb
+import numpy as np
 from numba.extending import overload
 
-__all__ = ["SHAPES", "SHAPE_TAGS", "weights", "linear", "quadratic", "cubic", "ghost_width",
-           "min_cells"]
+__all__ = ["SHAPES", "SHAPE_TAGS", "weights", "block_weights", "BLOCK", "linear", "quadratic",
+           "cubic", "block_coordinates", "ghost_width", "min_cells"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -67,10 +68,10 @@ def cubic(s, n):
     e = 1.0 - f
     f2 = f * f
     f3 = f2 * f
-    w0 = e * e * e / 6.0
+    w0 = e * e * e * (1.0 / 6.0)
     w1 = 0.5 * f3 - f2 + 2.0 / 3.0
-    w2 = (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) / 6.0
-    w3 = f3 / 6.0
+    w2 = (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) * (1.0 / 6.0)
+    w3 = f3 * (1.0 / 6.0)
     g0 = -0.5 * e * e
     g1 = 1.5 * f2 - 2.0 * f
     g2 = -1.5 * f2 + f + 0.5
@@ -107,6 +108,109 @@ def _weights_overload(tag, s, n):
     if count == 4:
         return lambda tag, s, n: cubic(s, n)
     return None
+
+
+# -- a block of particles at a time --------------------------------------------------------
+#
+# The transfer kernels evaluate the weights of BLOCK particles at once into small buffers and
+# then do the particles' scatters or gathers from there. The evaluation loops below run over
+# contiguous coordinates without branches, so the compiler turns them into SIMD code (8
+# particles per AVX-512 instruction here); the per-particle version above cannot be
+# vectorised, its callers scatter into the grid. Particles whose support touches a grid edge
+# (rare: the outermost cells) are redone afterwards with the scalar function, which owns the
+# boundary modification. Measured: about 10% of a cubic MUSL step (docs/performance.md).
+
+#: particles per block: the buffers (2 x 2K x BLOCK doubles) stay in the L1 cache
+BLOCK = 64
+
+
+@nb.njit(cache=True)
+def _linear_block(s, nq, n, start, W):
+    for q in range(nq):
+        c = min(max(math.floor(s[q]), 0.0), n - 1.0)
+        f = s[q] - c
+        W[0, q] = 1.0 - f
+        W[1, q] = f
+        W[2, q] = -1.0
+        W[3, q] = 1.0
+        start[q] = np.int64(c)
+
+
+@nb.njit(cache=True)
+def _quadratic_block(s, nq, n, start, W):
+    for q in range(nq):
+        c = math.floor(s[q] + 0.5)
+        f = s[q] - c
+        a = 0.5 - f
+        b = 0.5 + f
+        W[0, q] = 0.5 * a * a
+        W[1, q] = 0.75 - f * f
+        W[2, q] = 0.5 * b * b
+        W[3, q] = -a
+        W[4, q] = -2.0 * f
+        W[5, q] = b
+        start[q] = np.int64(c) - 1
+    for q in range(nq):  # supports reaching a ghost node: the boundary-modified weights
+        if start[q] < 0 or start[q] + 2 > n:
+            i0, w, g = quadratic(s[q], n)
+            _put(W, q, start, i0, w, g)
+
+
+@nb.njit(cache=True)
+def _cubic_block(s, nq, n, start, W):
+    for q in range(nq):
+        c = math.floor(s[q])
+        f = s[q] - c
+        e = 1.0 - f
+        f2 = f * f
+        f3 = f2 * f
+        W[0, q] = e * e * e * (1.0 / 6.0)
+        W[1, q] = 0.5 * f3 - f2 + 2.0 / 3.0
+        W[2, q] = (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) * (1.0 / 6.0)
+        W[3, q] = f3 * (1.0 / 6.0)
+        W[4, q] = -0.5 * e * e
+        W[5, q] = 1.5 * f2 - 2.0 * f
+        W[6, q] = -1.5 * f2 + f + 0.5
+        W[7, q] = 0.5 * f2
+        start[q] = np.int64(c) - 1
+    for q in range(nq):  # supports reaching a ghost node: the boundary-modified weights
+        if start[q] < 0 or start[q] + 3 > n:
+            i0, w, g = cubic(s[q], n)
+            _put(W, q, start, i0, w, g)
+
+
+@nb.njit(cache=True, inline="always")
+def _put(W, q, start, i0, w, g):
+    start[q] = i0
+    for k in range(len(w)):
+        W[k, q] = w[k]
+        W[len(w) + k, q] = g[k]
+
+
+def block_weights(tag, s, nq, n, start, W):
+    """Weights of the ``nq`` coordinates ``s`` (cell units) of the basis named by ``tag``:
+    ``start[q]`` the first node, ``W[k, q]`` the weight of node start + k and ``W[K + k, q]``
+    its derivative (K = len(tag)); the block form of ``weights``."""
+    {2: _linear_block, 3: _quadratic_block, 4: _cubic_block}[len(tag)](s, nq, n, start, W)
+
+
+@overload(block_weights)
+def _block_weights_overload(tag, s, nq, n, start, W):
+    count = tag.count
+    if count == 2:
+        return lambda tag, s, nq, n, start, W: _linear_block(s, nq, n, start, W)
+    if count == 3:
+        return lambda tag, s, nq, n, start, W: _quadratic_block(s, nq, n, start, W)
+    if count == 4:
+        return lambda tag, s, nq, n, start, W: _cubic_block(s, nq, n, start, W)
+    return None
+
+
+@nb.njit(cache=True, inline="always")
+def block_coordinates(x, p0, nq, axis, origin, inv_h, s):
+    """s[q] = (x[p0 + q, axis] - origin) / h: a block's coordinates in cell units, contiguous."""
+    for q in range(nq):
+        s[q] = (x[p0 + q, axis] - origin) * inv_h
 
 
 def ghost_width(name):

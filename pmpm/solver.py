@@ -77,7 +77,8 @@ class Solver:
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
                                          ghost_width(cfg.shape_function), points["x"])
-        optional = [f for f in OPTIONAL_FIELDS if f in scene.output.fields]
+        optional = [f for f in scene.output.fields
+                    if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
         del points
         self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
@@ -222,7 +223,7 @@ class Solver:
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         several = len(self.materials) > 1
         for k, material in enumerate(self.materials):
-            state = {name: p[name] for name in material.state_fields}
+            state = {name: p.fields.get(name) for name in material.state_fields}
             if self._dw is not None:
                 for name in material.tensor_state_fields:
                     K.jaumann_rotate(p[name], self._dw)

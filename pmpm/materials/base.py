@@ -74,6 +74,9 @@ class Material:
     state_fields = {}
     #: state fields that rotate with the stress under the Jaumann rate (Voigt, same layout as stress)
     tensor_state_fields = ()
+    #: state fields nothing in the step reads: kept only when the scene's output asks for them
+    #: (the kernel receives None otherwise and its update of the field is compiled out)
+    diagnostic_fields = ()
     #: formulations the model supports
     formulations = FORMULATIONS
 
@@ -130,8 +133,9 @@ class Material:
         ----------
         stress : ndarray (N, 4)
         de : ndarray (N, 3)
-        state : dict of ndarray
-            This material's ``state_fields`` arrays (first axis N).
+        state : dict of ndarray or None
+            This material's ``state_fields`` arrays (first axis N); a ``diagnostic_fields``
+            entry is None when the run does not keep it.
         mat_ids : ndarray (N,) int32
             Material index of each particle.
         which : int
@@ -146,6 +150,9 @@ class KinematicHardening(Material):
 
     state_fields = {"back_stress": (4,), "eps_p": (3,), "eps_p_eq": (), "plastic_work": ()}
     tensor_state_fields = ("back_stress",)
+    # the plastic strain tensor is output only (24 bytes per particle); eps_p_eq stays, the
+    # default colour of the deformed-shape plot
+    diagnostic_fields = ("eps_p",)
 
     def read_params(self, p):
         """Read ``yield_stress`` and ``hardening``.

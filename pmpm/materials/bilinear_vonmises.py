@@ -136,9 +136,10 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
                           + (ozz + nzz) * dpzz)
         stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = nxx, nyy, nxy, nzz
         back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
-        eps_p[p, 0] += dpxx
-        eps_p[p, 1] += dpyy
-        eps_p[p, 2] += dpxy
+        if eps_p is not None:  # kept only when output (diagnostic_fields)
+            eps_p[p, 0] += dpxx
+            eps_p[p, 1] += dpyy
+            eps_p[p, 2] += dpxy
         eps_eq[p] += dl
 
 

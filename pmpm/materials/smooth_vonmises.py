@@ -43,7 +43,8 @@ Known properties of the model as written (not defects of the integration)
 State
 -----
 back_stress (4,)  eta, same layout as stress (zz slot 0 in plane stress)
-eps_p (3,)        plastic strain (exx, eyy, gxy), engineering shear; ezz_p = -(exx_p + eyy_p)
+eps_p (3,)        plastic strain (exx, eyy, gxy), engineering shear; ezz_p = -(exx_p + eyy_p);
+                  kept only when the output asks for it (None otherwise: nothing reads it)
 eps_p_eq ()       sum of sqrt(2/3 d_eps_p : d_eps_p) (tensor shear, zz included); for the von Mises
                   flow direction sqrt(2/3 n : n) = 1, so this is sum |d_lambda|
 plastic_work ()   integral of sigma . d_eps_p per unit volume, so that kinetic + elastic strain
@@ -285,9 +286,10 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
         stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = sxx, syy, sxy, szz
         if plastic:  # elastic points leave their state untouched (saves the stores)
             back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
-            eps_p[p, 0] += pxx
-            eps_p[p, 1] += pyy
-            eps_p[p, 2] += pxy
+            if eps_p is not None:  # kept only when output (diagnostic_fields)
+                eps_p[p, 0] += pxx
+                eps_p[p, 1] += pyy
+                eps_p[p, 2] += pxy
             eps_eq[p] += eq
             work[p] += w
 

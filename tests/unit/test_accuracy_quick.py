@@ -1,5 +1,5 @@
 """``pmpm bench accuracy --quick``, run in-process through the command line into tmp_path
-(about two to three minutes on this 2-vCPU machine).
+(about 70 s on this 2-vCPU machine when it is idle, two minutes when it is shared).
 
 The quick sweep: the axial bar (against its exact solution, v0 = 1e-3, one period) with MUSL and
 2 x 2 particles per cell at 10, 20, 40, 80 and 160 cells for the three B-spline bases, and the
@@ -14,7 +14,7 @@ Checks:
 * cubic B-splines are at least as accurate as linear ones at equal wall time. This comparison is
   made on the **frame**, not on the bar: with the bar's small amplitude no particle crosses a
   cell boundary, so the linear basis has none of its cell-crossing error there and is expected
-  to be (and is, by a factor 3 to 6) the more accurate per second. The frame's first peak is
+  to be (and is, by a factor 2 to 6) the more accurate per second. The frame's first peak is
   where the cheap basis should pay for cell crossing. Each basis' error against wall time along
   its cell-size refinement (MUSL, 2 x 2 particles) is interpolated log-log and the two are
   compared at nine log-spaced wall times spanning the overlap of their ranges; cubic must be
