@@ -18,7 +18,9 @@ Checks:
   where the cheap basis should pay for cell crossing. Each basis' error against wall time along
   its cell-size refinement (MUSL, 2 x 2 particles) is interpolated log-log and the two are
   compared at nine log-spaced wall times spanning the overlap of their ranges; cubic must be
-  at least as accurate at every one of them.
+  at least as accurate at every one of them. It is not at the coarse end (an open finding,
+  marked xfail with the reason; docs/accuracy.md), so a second test checks what does hold:
+  the ratio falls along the overlap and cubic is ahead at its fine end.
 """
 import json
 
@@ -72,3 +74,14 @@ def test_cubic_at_least_as_accurate_as_linear_at_equal_wall_time(quick):
     detail = [f"{t:.2f} s: cubic {a:.3g}, linear {b:.3g}"
               for t, a, b in zip(cmp_["times_s"], cmp_["error_cubic"], cmp_["error_linear"])]
     assert cmp_["holds"], "cubic less accurate than linear at equal wall time: " + "; ".join(detail)
+
+
+def test_cubic_overtakes_linear_within_the_sweep(quick):
+    """What does hold on the frame, and can fail: cubic's error falls faster with wall time than
+    linear's (second order against linear's cell-crossing error, design.md section 7), so the
+    ratio cubic/linear falls along the overlap and cubic is the more accurate at its fine end."""
+    cmp_ = quick["summary"]["equal_time"]
+    ratio = cmp_["ratio"]
+    assert all(b < a for a, b in zip(ratio, ratio[1:])), ratio
+    assert ratio[-1] < 1.0 and cmp_["holds_from_s"] is not None, cmp_
+
