@@ -209,6 +209,8 @@ def throughput(args):
         print(f"{n_real:>9d} particles  {args.steps} steps x {args.repeat}: median {med:.3f} s  "
               f"{rate / 1e6:.2f} M particle-steps/s  {1e9 / rate:.1f} ns/particle-step "
               f"(CPU time: {res['cpu_particle_steps_per_s'] / 1e6:.2f} M/s)  peak memory {mem:.0f} B/particle")
+        if args.phases:
+            res["phases_ns"] = _print_phases(solver, args.steps, n_real)
         results.append(res)
         del solver
     bandwidth = stream_triad_bandwidth()
@@ -238,6 +240,18 @@ def _effect_scenes(n, record):
         "large rotations": block_scene(n, extra_solver={"large_rotations": True}),
         "plasticity (smooth_vonmises)": block_scene(n, material="smooth_vonmises"),
     }
+
+
+def _print_phases(solver, steps, n):
+    """The instrumented step: ns per particle-step of each kernel (pmpm/phase_profile.py)."""
+    from .phase_profile import phase_times
+    total, phases = phase_times(solver, steps)
+    scale = 1e9 / (steps * n)
+    rows = {k: v * scale for k, v in sorted(phases.items(), key=lambda kv: -kv[1])}
+    print(f"    where the time goes (instrumented, {steps} steps): total {total * scale:.1f} ns/particle-step")
+    for name, ns in rows.items():
+        print(f"      {name:22s} {ns:6.1f} ns  {100 * ns / (total * scale):4.0f}%")
+    return rows
 
 
 def effects(args):
@@ -287,6 +301,8 @@ def add_bench_parser(sub):
     t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
     t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    t.add_argument("--phases", action="store_true",
+                   help="also time every kernel call of the step (after the timed repeats)")
     e = bs.add_parser("effects", help="cost of each optional effect alone")
     e.add_argument("--particles", type=int, default=100_000)
     e.add_argument("--steps", type=int, default=10)
