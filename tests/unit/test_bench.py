@@ -1,0 +1,62 @@
+"""The benchmark commands run and say what they claim (their figures are not asserted: timings
+belong in benchmarks, not tests)."""
+import contextlib
+import io
+import json
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pmpm import kernels as K
+from pmpm.bench import YIELD_AFTER_STEPS, block_scene
+from pmpm.cli import main
+from pmpm.solver import Solver
+
+
+def _run(argv):
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = main(argv)
+    text = buf.getvalue()
+    return code, text, json.loads(text.strip().splitlines()[-1])
+
+
+def test_throughput_prints_rates_memory_bandwidth_and_phases():
+    original = K.p2g
+    code, text, summary = _run(["bench", "throughput", "--particles", "3000", "--steps", "2",
+                                "--repeat", "1", "--phases"])
+    assert code == 0
+    assert summary["particle_steps_per_s"] > 0 and summary["bytes_per_particle"] > 0
+    assert 0 < summary["fraction_of_bandwidth_floor"] < 1
+    phases = summary["phases_ns"]
+    for name in ("p2g", "g2p_velocity", "g2p_kinematics", "update_stress", "other"):
+        assert phases[name] > 0, name
+    assert "where the time goes" in text
+    assert K.p2g is original  # the profiler put the kernels back
+
+
+def test_effects_prints_every_effect():
+    code, text, summary = _run(["bench", "effects", "--particles", "2000", "--steps", "1",
+                                "--repeat", "1"])
+    assert code == 0
+    assert set(summary["effects"]) == {"none", "gravity", "force (step)", "damping", "ground motion",
+                                       "large rotations", "plasticity (smooth_vonmises)"}
+    assert summary["effects"]["none"]["overhead"] == 0.0
+
+
+@pytest.mark.parametrize("material", ["smooth_vonmises", "bilinear_vonmises"])
+def test_the_plastic_block_yields_before_timing(material):
+    """block_scene sets the yield stress to the von Mises stress of the block's shear after
+    YIELD_AFTER_STEPS steps (Phi = sqrt(3) G gamma), so the plastic benchmarks time a yielding
+    block: most particles are on the yield surface by then, and their increments fit one
+    sub-step of the smooth model (0.1 of the yield strain)."""
+    s = Solver(block_scene(50000, material=material), MPI.COMM_SELF)
+    for _ in range(YIELD_AFTER_STEPS + 10):
+        s.step()
+    sy = s.materials[0].yield_stress
+    t = s.particles["stress"] - s.particles["back_stress"]
+    phi = np.sqrt(t[:, 0] ** 2 - t[:, 0] * t[:, 1] + t[:, 1] ** 2 + 3 * t[:, 2] ** 2)
+    assert np.mean(phi > 0.9 * sy) > 0.6
+    assert np.mean(s.particles["eps_p_eq"] > 0) > 0.7
+    assert np.mean(np.abs(s._de).max(axis=1) <= 0.1 * sy / s.materials[0].E) > 0.99
