@@ -328,6 +328,19 @@ def _rk2_block(X, Y, nq, plane_strain, E, nu, cps, mu, isy, kint, xfloor, c):
                     + (sxy + 0.5 * m[2]) * m[10] - (szz + 0.5 * m[3]) * (m[8] + m[9]))
 
 
+@nb.njit(cache=True)
+def _substepped_py(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
+                   kint, xfloor, c, h, phi_quiet2):
+    """_substepped callable from Python: the reference the block path is tested against."""
+    _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
+                kint, xfloor, c, h, phi_quiet2)
+
+
+@nb.njit(cache=True)
+def _power_floor_py(kint):
+    return _power_floor(kint)
+
+
 #: particles per block of the vectorised path (its ~20 buffers stay in the L1 cache)
 _BLOCK = 64
 
@@ -370,6 +383,12 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     fast = np.empty(_BLOCK, np.bool_)
     for p0 in range(0, n, _BLOCK):
         nq = min(_BLOCK, n - p0)
+        if which >= 0:  # several materials: skip blocks with none of this one's particles
+            mine = 0
+            for q in range(nq):
+                mine += mat_ids[p0 + q] == which
+            if mine == 0:
+                continue
         for q in range(nq):
             p = p0 + q
             for k in range(4):
