@@ -162,7 +162,8 @@ class Run:
             logger.info("  material %s", m.describe())
         for line in self.effects():
             logger.info("  effect on: %s", line)
-        if cfg.time_step is not None and cfg.time_step > s.critical_dt():
+        # the same on every rank: said once, by rank 0 (other ranks log only their own troubles)
+        if cfg.time_step is not None and cfg.time_step > s.critical_dt() and self.rank == 0:
             logger.warning("time_step %.3g s is above the stable limit %.3g s (CFL = 1): expect divergence",
                            cfg.time_step, s.critical_dt())
 
@@ -230,7 +231,7 @@ class Run:
         self.close()
         summary = {"steps": s.step_count, "time": s.t, "wall": wall, "particles": s.n_total,
                    "removed": s.removed, "output": self.path if self.write else None}
-        if s.removed:
+        if s.removed and self.rank == 0:  # a global count
             logger.warning("%d particle(s) left the grid and were removed", s.removed)
         return summary
 
@@ -245,13 +246,14 @@ class Run:
                     s.t, 100 * s.t / end, s.step_count, s.dt, wall, left)
 
     def fail(self, exc, snap):
-        """Every rank arrives here together (the trouble flags are allreduced each step)."""
-        logger.error("run stopped: %s", exc)
+        """Every rank arrives here together (the trouble flags are allreduced each step), with
+        the same message, which the command line prints once as its error line."""
         try:
             self.flush_history()
             self.checkpoint(snap)
-            logger.error("last good state (t = %.6g s, step %d) saved to %s", snap.t, snap.step,
-                         _checkpoint_base(self.path) + ".ckpt*.h5" if self.write else "(no output)")
+            if self.rank == 0:
+                logger.error("last good state (t = %.6g s, step %d) saved to %s", snap.t, snap.step,
+                             _checkpoint_base(self.path) + ".ckpt*.h5" if self.write else "(no output)")
         finally:
             self.close()
 
