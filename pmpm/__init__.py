@@ -10,10 +10,11 @@ __version__ = "0.1.0"
 
 __all__ = ["__version__", "load_scene", "Solver", "Run"]
 
-from .jitcache import check_cache as _check_cache  # noqa: E402
+from .jitcache import use_versioned_cache as _use_versioned_cache  # noqa: E402
 
-# before any kernel loads from numba's cache: a stale entry would run old code (pmpm/jitcache.py)
-_check_cache()
+# before any kernel module is imported: numba's cache, one directory per version of the kernel
+# sources, so that no stale kernel can load (pmpm/jitcache.py)
+_use_versioned_cache()
 
 
 def __getattr__(name):

@@ -52,7 +52,8 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
     mat = dict(MATERIALS[material])
     if "yield_stress" in mat:
         E, nu, rho = mat["E"], mat["nu"], mat["density"]
-        dt = 0.5 * h / math.sqrt(E / (rho * (1 - nu * nu)))  # the CFL step below (plane stress)
+        cfl = (extra_solver or {}).get("cfl", 0.5)
+        dt = cfl * h / math.sqrt(E / (rho * (1 - nu * nu)))  # the CFL step below (plane stress)
         shear_rate = 2.0 / (ny * h)
         mat["yield_stress"] = math.sqrt(3.0) * E / (2 * (1 + nu)) * shear_rate * dt * YIELD_AFTER_STEPS
     data = {
@@ -65,7 +66,7 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
                     "velocity": [f"2.0 * y / {ny * h}", 0.0]}],
         "boundary": [{"type": "fixed", "lower": [0.0, 0.0], "upper": [(nx + 4) * h, 0.0]}],
         "solver": {"shape_function": shape, "scheme": scheme, "end_time": 1.0, "cfl": 0.5,
-                   **(extra_solver or {})},
+                   **(extra_solver or {})},  # (the yield stress above assumes this CFL number)
     }
     if gravity or force or extra_loads:
         data["loads"] = dict(extra_loads or {})
@@ -88,7 +89,8 @@ def _status_kib(key):
 def _memory_baseline():
     """Resident bytes now, with the kernel's peak-RSS mark reset to it (Linux clear_refs), so
     that a later _peak_rss_bytes() sees only what came after: not numba's compile-time peak,
-    not an earlier, freed problem. Elsewhere: the lifetime peak (an upper bound)."""
+    not an earlier, freed problem. Without clear_refs: the lifetime peak, so the difference
+    can read low (down to 0) when an earlier peak was higher."""
     try:
         with open("/proc/self/clear_refs", "w") as f:
             f.write("5")

@@ -21,6 +21,7 @@ PHASE_KERNELS = ("p2g", "g2p_velocity", "g2p_kinematics", "stress_power", "count
 
 @contextlib.contextmanager
 def _timed(obj, name, totals):
+    had_own = name in getattr(obj, "__dict__", {})  # a module's function, not a bound method
     original = getattr(obj, name)
 
     def wrapper(*args, **kwargs):
@@ -34,7 +35,10 @@ def _timed(obj, name, totals):
     try:
         yield
     finally:
-        setattr(obj, name, original)
+        if had_own:
+            setattr(obj, name, original)
+        else:  # a method: drop the instance attribute, the class's method shows again
+            delattr(obj, name)
 
 
 def phase_times(solver, steps):

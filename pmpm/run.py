@@ -93,7 +93,9 @@ class Run:
     def _restore(self, path):
         from .io import read_checkpoint
         s = self.solver
+        wanted = s.particles.spec()  # what this scene's run carries (name -> shape, dtype)
         fields, attrs = read_checkpoint(_checkpoint_base(path), self.comm)
+        self._complete_fields(fields, wanted, path)  # before anything is changed
         cols = np.floor((fields["x"][:, s.axis] - s.grid.origin[s.axis]) * s.grid.inv_h).astype(np.int64)
         from decomposition import alltoallv_fields
         s.particles.fields = alltoallv_fields(self.comm, fields, s.decomp.owner_of_columns(cols))
@@ -105,6 +107,13 @@ class Run:
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
+
+    def _complete_fields(self, fields, wanted, path):
+        """Refuse a checkpoint that lacks a field this scene's run carries (it is another
+        scene's: e.g. an elastic run's, without the back stress a plastic model reads)."""
+        missing = [k for k in wanted if k not in fields]
+        if missing:
+            raise ValueError(f"the checkpoint has no field {missing[0]!r}, which this scene needs")
 
     def checkpoint(self, snap=None):
         """Write the current (or a snapshot's) state as the newest checkpoint."""

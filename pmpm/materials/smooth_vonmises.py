@@ -65,8 +65,9 @@ by exactly mean(sigma) . d_eps per sub-step, to round-off.
 
 Cost: increments within one sub-step (nearly all in explicit MPM) of a model with an integer N
 take the block path of _update_smooth: both RK2 stages evaluated for 64 particles at a time in
-a branch-free loop the compiler vectorises, about 19 ns per particle-step here whatever the
-stress state (42 ns for the scalar loop it replaced). Other increments are sub-stepped by the
+a branch-free loop the compiler vectorises: 19 ns per stress point for the kernel alone on
+1,000,000 yielding points (13 ns within a step, docs/performance.md), whatever the stress
+state; the scalar loop it replaced took 42 ns where the points yield. Other increments are sub-stepped by the
 scalar path, where sub-steps along which H1 stays below 2^-53 (Phi under about 0.025 sigma_y
 for N = 10) and unloading sub-steps are one elastic update, exactly; loading ones evaluate the
 rate twice (one sqrt, one division, and an integer power when N is an integer, else one pow,

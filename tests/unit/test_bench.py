@@ -48,15 +48,15 @@ def test_effects_prints_every_effect():
 @pytest.mark.parametrize("material", ["smooth_vonmises", "bilinear_vonmises"])
 def test_the_plastic_block_yields_before_timing(material):
     """block_scene sets the yield stress to the von Mises stress of the block's shear after
-    YIELD_AFTER_STEPS steps (Phi = sqrt(3) G gamma), so the plastic benchmarks time a yielding
-    block: most particles are on the yield surface by then, and their increments fit one
-    sub-step of the smooth model (0.1 of the yield strain)."""
+    YIELD_AFTER_STEPS steps (Phi = sqrt(3) G gamma, uniform shear), and the benchmarks run that
+    many steps before timing: when timing starts most particles are within 10% of the yield
+    surface, and their increments fit one sub-step of the smooth model (0.1 of the yield
+    strain). (The block's shear is not uniform: waves from the clamp; hence "most".)"""
     s = Solver(block_scene(50000, material=material), MPI.COMM_SELF)
-    for _ in range(YIELD_AFTER_STEPS + 10):
+    for _ in range(YIELD_AFTER_STEPS):
         s.step()
     sy = s.materials[0].yield_stress
     t = s.particles["stress"] - s.particles["back_stress"]
     phi = np.sqrt(t[:, 0] ** 2 - t[:, 0] * t[:, 1] + t[:, 1] ** 2 + 3 * t[:, 2] ** 2)
     assert np.mean(phi > 0.9 * sy) > 0.6
-    assert np.mean(s.particles["eps_p_eq"] > 0) > 0.7
     assert np.mean(np.abs(s._de).max(axis=1) <= 0.1 * sy / s.materials[0].E) > 0.99

@@ -1,40 +1,49 @@
-"""The numba cache is emptied when a numba module's source changes (pmpm/jitcache.py): numba
-itself checks a cached kernel only against its own file, not the files it inlines from."""
+"""pmpm's numba cache lives in a directory named by the hash of its numba modules' sources
+(pmpm/jitcache.py): numba itself checks a cached kernel only against its own file, not the
+files it inlines from, so a changed shape.py must never meet kernels compiled from the old one."""
+import os
+import time
+
+import numba
+import pytest
+
 from pmpm import jitcache
 
 
-def _package(tmp_path, monkeypatch):
+@pytest.fixture
+def package(tmp_path, monkeypatch):
     pkg = tmp_path / "pkg"
-    (pkg / "kernels" / "__pycache__").mkdir(parents=True)
+    (pkg / "kernels").mkdir(parents=True)
     (pkg / "shape.py").write_text("import numba\ndef w(s): return s\n")
-    (pkg / "cli.py").write_text("print('no kernels here')\n")
+    (pkg / "kernels" / "transfer.py").write_text("from numba import njit\n")
+    (pkg / "cli.py").write_text("print('no kernels here, though numba is named')\n")
     monkeypatch.setattr(jitcache, "_PACKAGE", pkg)
-    monkeypatch.setattr(jitcache, "_STAMP", pkg / "__pycache__" / "numba-sources.sha256")
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setattr(numba.config, "CACHE_DIR", numba.config.CACHE_DIR)
     return pkg
 
 
-def _cached_kernel(pkg):
-    entries = [pkg / "kernels" / "__pycache__" / "transfer.p2g-1.py311.nbi",
-               pkg / "kernels" / "__pycache__" / "transfer.p2g-1.py311.1.nbc"]
-    for e in entries:
-        e.write_bytes(b"machine code")
-    return entries
+def test_changed_kernel_sources_get_a_new_directory(package):
+    first = jitcache.use_versioned_cache()
+    assert first.startswith(str(package / "__pycache__" / "numba-"))
+    assert os.environ["NUMBA_CACHE_DIR"] == first == numba.config.CACHE_DIR  # ranks inherit it
+    assert jitcache.use_versioned_cache() == first  # unchanged sources, same place
+    (package / "cli.py").write_text("print('still no kernels')\n")
+    assert jitcache.use_versioned_cache() == first  # a module without numba does not count
+    (package / "shape.py").write_text("import numba\ndef w(s): return 2 * s\n")
+    second = jitcache.use_versioned_cache()
+    assert second != first and os.path.dirname(second) == os.path.dirname(first)
 
 
-def test_a_changed_inlined_source_empties_the_cache(tmp_path, monkeypatch):
-    pkg = _package(tmp_path, monkeypatch)
-    assert jitcache.check_cache()  # no stamp yet: emptied and stamped
-    entries = _cached_kernel(pkg)
-    assert not jitcache.check_cache() and all(e.exists() for e in entries)  # unchanged: kept
-    (pkg / "shape.py").write_text("import numba\ndef w(s): return 2 * s\n")
-    assert jitcache.check_cache()
-    assert not any(e.exists() for e in entries)
-    assert not jitcache.check_cache()  # stamped again
-
-
-def test_a_module_without_numba_does_not_count(tmp_path, monkeypatch):
-    pkg = _package(tmp_path, monkeypatch)
-    jitcache.check_cache()
-    entries = _cached_kernel(pkg)
-    (pkg / "cli.py").write_text("print('still no kernels')\n")
-    assert not jitcache.check_cache() and all(e.exists() for e in entries)
+def test_a_users_cache_dir_is_the_parent_and_old_versions_go_after_a_day(package, tmp_path, monkeypatch):
+    user = tmp_path / "user-cache"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(user))
+    target = jitcache.use_versioned_cache()
+    assert os.path.dirname(target) == str(user)
+    stale, recent = user / "numba-0000000000000000", user / "numba-1111111111111111"
+    for d in (stale, recent):
+        (d / "sub").mkdir(parents=True)
+    day_old = time.time() - 2 * jitcache._KEEP_OLD
+    os.utime(stale, (day_old, day_old))
+    assert jitcache.use_versioned_cache() == target  # the variable now names the version dir
+    assert not stale.exists() and recent.exists()  # recent: a running process may still write
