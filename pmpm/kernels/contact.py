@@ -40,7 +40,7 @@ import math
 import numba as nb
 
 from ..shape import weights
-from .transfer import _external_force
+from .transfer import _external_force, move, strain_increment
 
 __all__ = ["p2g_bodies", "g2p_velocity_bodies", "g2p_kinematics_bodies", "contact_update",
            "N_BODY_FIELDS", "MASS", "MOM", "FORCE", "GRAD", "REMAP", "FACING"]
@@ -297,25 +297,7 @@ def g2p_kinematics_bodies(x, m, vol, strain, de, dw, body, slot_of, vel_field, d
                     lyx += gvy * dnx
                     lyy += gvy * dny
         if de is not None:
-            c = dt * inv_h
-            dexx = c * lxx
-            deyy = c * lyy
-            dgxy = c * (lxy + lyx)
-            de[p, 0] = dexx
-            de[p, 1] = deyy
-            de[p, 2] = dgxy
-            if dw is not None:
-                dw[p] = 0.5 * c * (lyx - lxy)
-            if strain is not None:
-                strain[p, 0] += dexx
-                strain[p, 1] += deyy
-                strain[p, 2] += dgxy
-            vol[p] *= 1.0 + dexx + deyy
+            strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol)
         if dx is not None:
-            ux = dx[p, 0]
-            uy = dx[p, 1]
-            x[p, 0] += ux
-            x[p, 1] += uy
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            work += fx * ux + fy * uy
+            work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work

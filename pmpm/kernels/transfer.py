@@ -34,6 +34,36 @@ def _external_force(p, m, gravity, load_id, load_w, load_vec):
 
 
 @nb.njit(cache=True, inline="always")
+def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol):
+    """Particle p's strain increment c L (c = dt / h, L the velocity gradient sums in cell
+    units) into ``de``, its spin into ``dw`` (not None), ``strain`` (not None) and volume."""
+    dexx = c * lxx
+    deyy = c * lyy
+    dgxy = c * (lxy + lyx)
+    de[p, 0] = dexx
+    de[p, 1] = deyy
+    de[p, 2] = dgxy
+    if dw is not None:
+        dw[p] = 0.5 * c * (lyx - lxy)
+    if strain is not None:
+        strain[p, 0] += dexx
+        strain[p, 1] += deyy
+        strain[p, 2] += dgxy
+    vol[p] *= 1.0 + dexx + deyy
+
+
+@nb.njit(cache=True, inline="always")
+def move(p, x, dx, m, gravity, load_id, load_w, load_vec):
+    """x += dx for particle p; returns the work of its external force over the move."""
+    ux = dx[p, 0]
+    uy = dx[p, 1]
+    x[p, 0] += ux
+    x[p, 1] += uy
+    fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+    return fx * ux + fy * uy
+
+
+@nb.njit(cache=True, inline="always")
 def _buffers(shape):
     """Per-block scratch: coordinates, first nodes and weights/derivatives along x and y."""
     k2 = 2 * len(shape)
@@ -197,25 +227,7 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
                         lxy += gvx * dny
                         lyx += gvy * dnx
                         lyy += gvy * dny
-                c = dt * inv_h
-                dexx = c * lxx
-                deyy = c * lyy
-                dgxy = c * (lxy + lyx)
-                de[p, 0] = dexx
-                de[p, 1] = deyy
-                de[p, 2] = dgxy
-                if dw is not None:
-                    dw[p] = 0.5 * c * (lyx - lxy)
-                if strain is not None:
-                    strain[p, 0] += dexx
-                    strain[p, 1] += deyy
-                    strain[p, 2] += dgxy
-                vol[p] *= 1.0 + dexx + deyy
+                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol)
             if dx is not None:
-                ux = dx[p, 0]
-                uy = dx[p, 1]
-                x[p, 0] += ux
-                x[p, 1] += uy
-                fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-                work += fx * ux + fy * uy
+                work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work
