@@ -85,7 +85,7 @@ import os
 import sys
 
 try:
-    from pmpm.config import load_scene
+    from pmpm.scene.config import load_scene
     scenes = load_scene(sys.argv[1], sys.argv[2] or None)
 except Exception as exc:  # noqa: BLE001 - pmpm reports it properly when it runs
     print(f"note: could not read {sys.argv[1]} ahead of the run: {exc}", file=sys.stderr)

@@ -38,7 +38,7 @@ def _tool_parser():
     export.add_argument("file")
     export.add_argument("--format", default="vtu", choices=["vtu", "xdmf"])
     export.add_argument("-o", "--outdir", default=None)
-    from .bench import add_bench_parser
+    from pmpm.benchmarks.cli import add_bench_parser
     add_bench_parser(sub)
     return p
 
@@ -62,9 +62,9 @@ def _tool(argv):
     import os
     args = _tool_parser().parse_args(argv)
     if args.tool == "bench":
-        from .bench import main as bench_main
+        from pmpm.benchmarks.cli import main as bench_main
         return bench_main(args)
-    from .log import setup_logging
+    from pmpm.log import setup_logging
     setup_logging(0)
     files = args.files if args.tool == "plot" else [args.file]
     for f in files:
@@ -72,21 +72,21 @@ def _tool(argv):
             return _fail(f"{f}: no such file", EXIT_BAD_INPUT)
     outdir = args.outdir or os.path.dirname(os.path.abspath(files[0]))
     if args.tool == "plot":
-        from .io import plot_results
+        from pmpm.io import plot_results
         for path in plot_results(files, outdir):
             print(f"wrote {path}")
     elif args.format == "vtu":
-        from .io import export
+        from pmpm.io import export
         for path in export(args.file, "vtu", outdir):
             print(f"wrote {path}")
     else:
-        from .io import write_xdmf
+        from pmpm.io import write_xdmf
         print(f"wrote {write_xdmf(args.file)}")
     return 0
 
 
 def _scenes(args):
-    from .config import load_scene
+    from pmpm.scene.config import load_scene
     return load_scene(args.case, args.variant)
 
 
@@ -95,8 +95,8 @@ def run_case(argv):
     args = _run_parser().parse_args(argv)
     from mpi4py import MPI
     from decomposition import install_abort_hook
-    from .errors import ConfigError, ParticleExitError, UnstableRunError
-    from .log import setup_logging
+    from pmpm.errors import ConfigError, ParticleExitError, UnstableRunError
+    from pmpm.log import setup_logging
     comm = MPI.COMM_WORLD
     rank = comm.Get_rank()
     setup_logging(rank, args.quiet)
@@ -112,7 +112,7 @@ def run_case(argv):
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",
                      EXIT_BAD_INPUT) if rank == 0 else EXIT_BAD_INPUT
     install_abort_hook(comm)
-    from .run import Run
+    from pmpm.run import Run
     paths = []
     for scene in scenes:
         try:
@@ -131,7 +131,7 @@ def run_case(argv):
         if rank == 0:
             logger.info("done: %d steps in %.1f s wall -> %s", summary["steps"], summary["wall"], summary["output"])
     if rank == 0 and not args.no_plots:
-        from .post import postprocess
+        from pmpm.io.post import postprocess
         postprocess(scenes, paths)
     return 0
 

@@ -1,7 +1,7 @@
 """Keep numba's on-disk kernel cache consistent with the source it was compiled from.
 
 numba checks a cached kernel only against the file that defines it. A kernel that inlines a
-function from another file (every transfer kernel inlines the B-splines of pmpm/shape.py, the
+function from another file (every transfer kernel inlines the B-splines of pmpm/core/shape.py, the
 material kernels share linear_elastic.py) would keep running the old machine code after that
 other file changed. So pmpm keeps its kernels in a cache directory named by a hash of the
 sources of all its numba modules: changed sources mean a new, empty directory, and the next run

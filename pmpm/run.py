@@ -12,10 +12,10 @@ import time
 
 import numpy as np
 
-from . import __version__
-from .errors import ParticleExitError, UnstableRunError
-from .solver import Solver
-from .tracking import HISTORY_COLUMNS, Tracker
+from pmpm import __version__
+from pmpm.errors import ParticleExitError, UnstableRunError
+from pmpm.core.solver import Solver
+from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
 
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
@@ -56,7 +56,7 @@ class Run:
 
     def __init__(self, scene, comm=None, write=True, restart=None, snapshot_every=50):
         self.scene = scene
-        from .contact import ContactSolver  # scene [contact]: one velocity field per body
+        from pmpm.physics.contact import ContactSolver  # scene [contact]: one velocity field per body
         self.solver = (Solver if scene.contact is None else ContactSolver)(scene, comm)
         self.comm = self.solver.comm
         self.rank = self.comm.Get_rank()
@@ -78,7 +78,7 @@ class Run:
         return {f: (p[f].shape[1:], p[f].dtype) for f in names}
 
     def _open_output(self):
-        from .io import OutputFile
+        from pmpm.io import OutputFile
         if self.rank == 0:
             os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
         self.comm.Barrier()
@@ -91,7 +91,7 @@ class Run:
                           append=self.restarted_from is not None, truncate_after=self.restarted_from)
 
     def _restore(self, path):
-        from .io import read_checkpoint
+        from pmpm.io import read_checkpoint
         s = self.solver
         wanted = s.particles.spec()  # what this scene's run carries (name -> shape, dtype)
         fields, attrs = read_checkpoint(_checkpoint_base(path), self.comm)
@@ -119,7 +119,7 @@ class Run:
         """Write the current (or a snapshot's) state as the newest checkpoint."""
         if not self.write:
             return
-        from .io import write_checkpoint
+        from pmpm.io import write_checkpoint
         self.flush_history()  # so a restart from this checkpoint misses no history row
         s = self.solver
         snap = snap or _Snapshot(s)
@@ -271,7 +271,7 @@ class Run:
             self.output.close()
             self.output = None
             if self.rank == 0:
-                from .io import write_xdmf
+                from pmpm.io import write_xdmf
                 write_xdmf(self.path)
 
 

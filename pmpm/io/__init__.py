@@ -15,11 +15,11 @@ most of a second to import, which every rank of a run would otherwise pay.
 
 import logging
 
-from .checkpoint import checkpoint_paths, latest_checkpoint, read_checkpoint, write_checkpoint
-from .export import export
-from .hdf5 import OutputFile, read_attrs, read_energies, read_frame, read_history
-from .plot import energy_balance_error, plot_deformed, plot_results
-from .xdmf import write_xdmf
+from pmpm.io.checkpoint import checkpoint_paths, latest_checkpoint, read_checkpoint, write_checkpoint
+from pmpm.io.export import export
+from pmpm.io.hdf5 import OutputFile, read_attrs, read_energies, read_frame, read_history
+from pmpm.io.plot import energy_balance_error, plot_deformed, plot_results
+from pmpm.io.xdmf import write_xdmf
 
 __all__ = [
     "OutputFile",

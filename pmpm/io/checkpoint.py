@@ -32,7 +32,7 @@ from mpi4py import MPI
 
 from decomposition.slab import block_range
 
-from ._parallel import (
+from pmpm.io._parallel import (
     check_all,
     fill_value,
     json_dumps,

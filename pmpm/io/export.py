@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 
-from .xdmf import write_xdmf
+from pmpm.io.xdmf import write_xdmf
 
 __all__ = ["export", "FORMATS"]
 

@@ -49,7 +49,7 @@ import os
 import h5py
 import numpy as np
 
-from ._parallel import (
+from pmpm.io._parallel import (
     check_all,
     fill_value,
     json_dumps,

@@ -23,7 +23,7 @@ import os
 import h5py
 import numpy as np
 
-from .hdf5 import read_attrs, read_energies, read_history
+from pmpm.io.hdf5 import read_attrs, read_energies, read_history
 
 __all__ = ["plot_results", "plot_deformed", "energy_balance_error"]
 

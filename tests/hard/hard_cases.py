@@ -18,9 +18,9 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from pmpm.config import load_scene
-from pmpm.solver import Solver
-from pmpm.tracking import Tracker
+from pmpm.scene.config import load_scene
+from pmpm.core.solver import Solver
+from pmpm.io.tracking import Tracker
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CASES_DIR = os.path.join(ROOT, "cases", "hard")

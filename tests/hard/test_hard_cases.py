@@ -107,7 +107,7 @@ def test_travelling_block_crosses_many_cells_without_pumping_its_vibration():
 
 def _initial_body_frame_kinetic(scene):
     from mpi4py import MPI
-    from pmpm.solver import Solver
+    from pmpm.core.solver import Solver
     return body_frame_energy(Solver(scene, MPI.COMM_SELF))
 
 

@@ -47,7 +47,7 @@ def _stable_step_and_onset(variant):
     divergence is evident in a serial run: the kinetic energy (which, unlike the internal work,
     cannot go negative) above twice the energy supplied."""
     from mpi4py import MPI
-    from pmpm.solver import Solver
+    from pmpm.core.solver import Solver
     s = Solver(load(CASE, variant), MPI.COMM_SELF)
     stable = s.grid.h / (wave_speed(s) + s.vmax)
     onset = None

@@ -143,8 +143,8 @@ def test_an_exception_on_one_rank_stops_all_ranks(tmp_path):
     script.write_text(
         "from mpi4py import MPI\n"
         "from decomposition import install_abort_hook\n"
-        "from pmpm.config import load_scene\n"
-        "from pmpm.solver import Solver\n"
+        "from pmpm.scene.config import load_scene\n"
+        "from pmpm.core.solver import Solver\n"
         "install_abort_hook(MPI.COMM_WORLD)\n"
         f"s = Solver(load_scene({os.path.join(ROOT, 'cases', 'bar.toml')!r})[0])\n"
         "for k in range(50):\n"

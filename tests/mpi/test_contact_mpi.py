@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene, parse_scene
-from pmpm.contact import ContactSolver
+from pmpm.scene.config import load_scene, parse_scene
+from pmpm.physics.contact import ContactSolver
 
 comm = MPI.COMM_WORLD
 RTOL = 1e-10

@@ -7,8 +7,8 @@ grid columns, and their size is the ghost width times the column height times th
 import pytest
 from mpi4py import MPI
 
-from pmpm.bench import block_scene
-from pmpm.solver import Solver
+from pmpm.benchmarks.block import block_scene
+from pmpm.core.solver import Solver
 
 comm = MPI.COMM_WORLD
 

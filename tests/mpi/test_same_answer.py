@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene, parse_scene
-from pmpm.solver import Solver
-from pmpm.tracking import Tracker
+from pmpm.scene.config import load_scene, parse_scene
+from pmpm.core.solver import Solver
+from pmpm.io.tracking import Tracker
 
 comm = MPI.COMM_WORLD
 RTOL = 1e-10

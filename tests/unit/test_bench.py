@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm import kernels as K
-from pmpm.bench import YIELD_AFTER_STEPS, block_scene
+from pmpm.core import kernels as K
+from pmpm.benchmarks.block import YIELD_AFTER_STEPS, block_scene
 from pmpm.cli import main
-from pmpm.solver import Solver
+from pmpm.core.solver import Solver
 
 
 def _run(argv):

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene, parse_scene
+from pmpm.scene.config import load_scene, parse_scene
 from pmpm.errors import ConfigError
 
 BASE = {
@@ -74,7 +74,7 @@ def error_of(data, path="case.toml"):
 
 def solver_error(data, tmp_path):
     """The ConfigError raised while the solver sets the scene up on one rank."""
-    from pmpm.solver import Solver
+    from pmpm.core.solver import Solver
     scene = parse_scene(data, str(tmp_path / "case.toml"))
     with pytest.raises(ConfigError) as info:
         Solver(scene, MPI.COMM_SELF)
@@ -432,8 +432,8 @@ def test_i_section_too_coarse_for_its_particles(tmp_path, depth, ppc):
 
 def test_i_section_matches_area_and_second_moment():
     import numpy as np
-    from pmpm.bodies import body_points
-    from pmpm.grid import Grid
+    from pmpm.scene.bodies import body_points
+    from pmpm.core.grid import Grid
     isec = {"shape": "i_section", "material": "steel", "start": [0.25, 1.0], "end": [3.75, 1.0],
             "depth": 1.5, "flange_width": 0.8, "flange_thickness": 0.1, "web_thickness": 0.05,
             "particles_per_cell": 2}

@@ -1,4 +1,4 @@
-"""Contact between bodies with friction (scene ``[contact]``, pmpm/contact.py).
+"""Contact between bodies with friction (scene ``[contact]``, pmpm/physics/contact.py).
 
 Serial: the scene section, that the default solver is untouched without it, the two colliding
 disks with frictionless contact (momentum, energy, rebound, no interpenetration), bodies that
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import apply_overrides, load_scene, parse_scene
-from pmpm.contact import ContactSolver, contact_slots
+from pmpm.scene.config import apply_overrides, load_scene, parse_scene
+from pmpm.physics.contact import ContactSolver, contact_slots
 from pmpm.errors import ConfigError
 from pmpm.run import Run
-from pmpm.solver import Solver
+from pmpm.core.solver import Solver
 
 SELF = MPI.COMM_SELF
 KE0 = 2 * 0.5 * (1000 * math.pi * 0.2 ** 2) * (0.1 ** 2 + 0.1 ** 2)  # the disks, 2.513 J/m

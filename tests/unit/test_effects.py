@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import parse_scene
+from pmpm.scene.config import parse_scene
 from pmpm.errors import ConfigError
-from pmpm.groundmotion import G, read_record
-from pmpm.solver import Solver
+from pmpm.physics.groundmotion import G, read_record
+from pmpm.core.solver import Solver
 
 E, RHO = 1e5, 100.0
 

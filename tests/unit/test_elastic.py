@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from pmpm.errors import ConfigError
-from pmpm.materials import make_material
+from pmpm.physics.materials import make_material
 
 E, NU, RHO = 210e9, 0.3, 7800.0
 

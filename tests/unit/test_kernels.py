@@ -1,11 +1,11 @@
-"""The numba transfer kernels agree with their plain NumPy twins (pmpm.kernels.reference),
+"""The numba transfer kernels agree with their plain NumPy twins (pmpm.core.kernels.reference),
 on the whole grid and on a window of it (the rank-local grid of a slab)."""
 import numpy as np
 import pytest
 
-from pmpm import kernels as K
-from pmpm.kernels.reference import g2p_velocity_reference, p2g_reference
-from pmpm.shape import SHAPE_TAGS, SHAPES
+from pmpm.core import kernels as K
+from pmpm.core.kernels.reference import g2p_velocity_reference, p2g_reference
+from pmpm.core.shape import SHAPE_TAGS, SHAPES
 
 ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
 CELLS = (9, 6)
@@ -121,7 +121,7 @@ def test_cell_order_sorts_by_cell_and_is_a_permutation():
 
 
 def test_reorder_in_place_equals_fancy_indexing():
-    from pmpm.particles import Particles
+    from pmpm.core.particles import Particles
     rng = np.random.default_rng(3)
     n = 257
     fields = {"id": np.arange(n, dtype=np.int64), "x": rng.normal(size=(n, 2)),

@@ -3,9 +3,9 @@ import meshio
 import numpy as np
 import pytest
 
-from pmpm.bodies import body_points
-from pmpm.config import parse_scene
-from pmpm.grid import Grid
+from pmpm.scene.bodies import body_points
+from pmpm.scene.config import parse_scene
+from pmpm.core.grid import Grid
 
 
 def _scene(tmp_path, ppe):

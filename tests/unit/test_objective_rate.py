@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import parse_scene
-from pmpm.kernels import jaumann_rotate
-from pmpm.solver import Solver
+from pmpm.scene.config import parse_scene
+from pmpm.core.kernels import jaumann_rotate
+from pmpm.core.solver import Solver
 
 
 def test_many_small_spins_rotate_the_stress_like_the_rotation_matrix():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pmpm.errors import ConfigError
-from pmpm.materials import make_material
+from pmpm.physics.materials import make_material
 
 E = 200e9
 NU = 0.3

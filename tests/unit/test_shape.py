@@ -3,8 +3,8 @@ agreement with the independent reference and with Steffen's modified cubic B-spl
 import numpy as np
 import pytest
 
-from pmpm.kernels.reference import bspline_1d
-from pmpm.shape import SHAPES, cubic, min_cells
+from pmpm.core.kernels.reference import bspline_1d
+from pmpm.core.shape import SHAPES, cubic, min_cells
 
 ORDERS = {"linear": 1, "quadratic": 2, "cubic": 3}
 N_CELLS = 7

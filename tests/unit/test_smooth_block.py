@@ -1,10 +1,10 @@
 """The smooth model's two paths agree: the vectorised block path (single-sub-step increments,
 integer N) against the scalar sub-stepped loop, which serves as its reference
-(pmpm/materials/smooth_vonmises.py)."""
+(pmpm/physics/materials/smooth_vonmises.py)."""
 import numpy as np
 import pytest
 
-from pmpm.materials import smooth_vonmises as sv
+from pmpm.physics.materials import smooth_vonmises as sv
 
 E, NU, SY, ALPHA = 200e9, 0.3, 250e6, 0.05
 

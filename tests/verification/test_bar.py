@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene, parse_scene
-from pmpm.solver import Solver
+from pmpm.scene.config import load_scene, parse_scene
+from pmpm.core.solver import Solver
 
 L, E, RHO = 25.0, 100.0, 1.0
 BETA = math.pi / (2 * L)

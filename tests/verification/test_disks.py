@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene
-from pmpm.solver import Solver
+from pmpm.scene.config import load_scene
+from pmpm.core.solver import Solver
 
 KE0 = 2 * 0.5 * (1000 * math.pi * 0.2 ** 2) * (0.1 ** 2 + 0.1 ** 2)  # 2.513 per unit thickness
 

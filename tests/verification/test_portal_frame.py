@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.config import load_scene
-from pmpm.solver import Solver
-from pmpm.tracking import Tracker
+from pmpm.scene.config import load_scene
+from pmpm.core.solver import Solver
+from pmpm.io.tracking import Tracker
 
 sys.path.insert(0, os.path.dirname(__file__))
 import frame_beam_model as beam  # noqa: E402

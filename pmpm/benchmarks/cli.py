@@ -1,0 +1,46 @@
+"""``pmpm bench ...``: the benchmark sub-commands and their dispatch."""
+from pmpm.benchmarks.block import MATERIALS
+
+__all__ = ["add_bench_parser", "main"]
+
+
+def add_bench_parser(sub):
+    """Register ``pmpm bench throughput|scaling`` on an argparse sub-parser set."""
+    b = sub.add_parser("bench", help="benchmarks (throughput, scaling)")
+    bs = b.add_subparsers(dest="bench", required=True)
+    t = bs.add_parser("throughput", help="particle-steps per second on one core")
+    t.add_argument("--particles", type=int, nargs="+", default=[200_000])
+    t.add_argument("--steps", type=int, default=20)
+    t.add_argument("--repeat", type=int, default=5)
+    t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
+    t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
+    t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    t.add_argument("--phases", action="store_true",
+                   help="also time every kernel call of the step (after the timed repeats)")
+    e = bs.add_parser("effects", help="cost of each optional effect alone")
+    e.add_argument("--particles", type=int, default=100_000)
+    e.add_argument("--steps", type=int, default=10)
+    e.add_argument("--repeat", type=int, default=5)
+    s = bs.add_parser("scaling", help="run under mpirun: compute/communication split per rank")
+    s.add_argument("--mode", choices=["strong", "weak"], default="strong")
+    s.add_argument("--particles", type=int, default=1_000_000)
+    s.add_argument("--steps", type=int, default=20)
+    s.add_argument("--repeat", type=int, default=3)
+    s.add_argument("--ppc", type=int, default=2,
+                   help="particles per cell per direction (more particles on the same grid)")
+    from pmpm.benchmarks.accuracy import add_arguments
+    add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
+
+
+def main(args):
+    """Dispatch ``pmpm bench <name>``."""
+    from pmpm.benchmarks.throughput import effects, throughput
+    if args.bench == "throughput":
+        return throughput(args)
+    if args.bench == "accuracy":
+        from pmpm.benchmarks.accuracy import accuracy
+        return accuracy(args)
+    if args.bench == "effects":
+        return effects(args)
+    from pmpm.benchmarks.scaling import scaling
+    return scaling(args)

@@ -1,0 +1,59 @@
+"""Where a step's time goes: every kernel call of a running solver timed (``pmpm bench
+throughput --phases``).
+
+The kernels are wrapped for the duration of the measurement only: the solver calls them through
+the ``pmpm.core.kernels`` module and through its materials' ``update_stress``, so those are the
+names replaced, then restored.
+"""
+import collections
+import contextlib
+import time
+
+from pmpm.core import kernels as K
+
+__all__ = ["phase_times", "PHASE_KERNELS"]
+
+#: the kernels the solver calls each step (the others run at set-up or output only)
+PHASE_KERNELS = ("p2g", "g2p_velocity", "g2p_kinematics", "stress_power", "count_strays",
+                 "grid_update", "momentum_to_velocity", "jaumann_rotate", "cell_order",
+                 "scatter_point_loads", "point_load_work")
+
+
+@contextlib.contextmanager
+def _timed(obj, name, totals):
+    had_own = name in getattr(obj, "__dict__", {})  # a module's function, not a bound method
+    original = getattr(obj, name)
+
+    def wrapper(*args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            totals[name] += time.perf_counter() - t0
+
+    setattr(obj, name, wrapper)
+    try:
+        yield
+    finally:
+        if had_own:
+            setattr(obj, name, original)
+        else:  # a method: drop the instance attribute, the class's method shows again
+            delattr(obj, name)
+
+
+def phase_times(solver, steps):
+    """Run ``steps`` steps with every kernel call timed. Returns (total seconds, {phase:
+    seconds}); the phase "other" is the rest (Python, exchanges, checks)."""
+    totals = collections.defaultdict(float)
+    with contextlib.ExitStack() as stack:
+        for name in PHASE_KERNELS:
+            stack.enter_context(_timed(K, name, totals))
+        for material in solver.materials:
+            stack.enter_context(_timed(material, "update_stress", totals))
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            solver.step()
+        total = time.perf_counter() - t0
+    phases = {k: v for k, v in totals.items() if v > 0}
+    phases["other"] = max(total - sum(phases.values()), 0.0)
+    return total, phases

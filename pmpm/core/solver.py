@@ -1,0 +1,357 @@
+"""The explicit MPM solver: owns the grid window, particles, materials, scheme and loads.
+
+One step (paper section 3, steps 1-10) is the scheme's ordered list of phases, each a short
+method here that calls one numba kernel or one exchange::
+
+    reset_grid -> particles_to_grid -> exchange_halo -> update_grid -> grid_to_particles
+    -> [MUSL: exchange_halo (re-map) -> grid_velocity] -> update_strain -> update_stress
+    -> migrate -> next time step
+
+The serial run is the one-rank case of the same code: the halo exchange and the migration are
+no-ops there, nothing else changes.
+"""
+import logging
+import math
+import time
+
+import numpy as np
+
+from decomposition import alltoallv_fields, get_comm
+from pmpm.core import kernels as K
+from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
+from pmpm.errors import ParticleExitError, UnstableRunError
+from pmpm.core.grid import Grid, GridWindow
+from pmpm.physics.groundmotion import GroundMotion
+from pmpm.physics.loads import Loads
+from pmpm.physics.materials import make_material
+from pmpm.core.schemes import make_scheme
+from pmpm.core.particles import OPTIONAL_FIELDS
+from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
+from pmpm.core.shape import SHAPE_TAGS, ghost_width, min_cells
+from pmpm.errors import ConfigError
+
+__all__ = ["Solver"]
+logger = logging.getLogger(__name__)
+
+#: steps between energy checks (each is one pass over the particles and one allreduce)
+ENERGY_CHECK_INTERVAL = 10
+#: energy above (initial + external work) that counts as divergence, relative to the energies
+#: in play: healthy runs stay within a few percent (tests show < 5%), diverging ones explode
+ENERGY_GROWTH_LIMIT = 0.5
+
+
+def _scene_dir(scene):
+    import os
+    return os.path.dirname(scene.path) if os.path.isabs(scene.path) else "."
+
+
+class Solver:
+    """Explicit MPM on the ranks of ``comm`` (``None``: COMM_WORLD).
+
+    Parameters
+    ----------
+    scene : pmpm.scene.config.Scene
+    comm : mpi4py communicator, optional
+    """
+
+    def __init__(self, scene, comm=None):
+        self.scene = scene
+        self.comm = get_comm(comm)
+        cfg = scene.solver
+        self.grid = Grid(scene.grid.origin, scene.grid.cell_size, scene.grid.cells)
+        if min(self.grid.cells) < min_cells(cfg.shape_function):
+            raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines need at least "
+                                            f"{min_cells(cfg.shape_function)} cells per axis")
+        self.shape = SHAPE_TAGS[cfg.shape_function]
+        self.labels = list(scene.materials)
+        self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
+                          for k in self.labels]
+        self.scheme = make_scheme(cfg.scheme)
+        self.loads = Loads(scene.loads)
+        check_boundaries(scene.boundaries, self.grid)
+        self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
+                       if scene.loads.ground_motion else None)
+        self.damping = scene.loads.damping or None  # None compiles the damping out
+        points = place_points(scene, self.grid, self.materials, self.labels)
+        self.n_total = len(points["m"])
+        self.axis = choose_axis(scene.parallel.axis, self.grid)
+        self.decomp = make_decomposition(self.comm, self.grid, self.axis,
+                                         ghost_width(cfg.shape_function), points["x"])
+        optional = [f for f in scene.output.fields
+                    if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
+        self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
+        del points
+        self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
+        self._build_window()
+        self.wave_speed = max(m.wave_speed() for m in self.materials)
+        self.mass_cutoff = cfg.mass_cutoff * self.decomp.allreduce_max(
+            float(self.particles["m"].max()) if self.particles.n else 0.0)
+        self.t = 0.0
+        self.step_count = 0
+        self.external_work = 0.0   # this rank's share; summed when reported
+        self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
+        self.damping_work = 0.0    # energy taken out by mass-proportional damping (owned nodes)
+        self.removed = 0
+        self.rebalances = 0
+        self.vmax = self.decomp.allreduce_max(self._local_speed())
+        self.dt = self.stable_dt(self.vmax)
+        self._vmax_healthy = self.vmax
+        self.initial_energy = self.energies()["total"]
+
+    # -- set-up helpers ---------------------------------------------------------------------
+    def _owned(self, x):
+        cols = K.cell_columns(x, self.grid.origin, self.grid.inv_h, self.axis)
+        return self.decomp.owner_of_columns(cols) == self.decomp.rank
+
+    def _build_window(self):
+        self.window = GridWindow(self.grid, self.axis, self.decomp.window)
+        apply_boundary_masks(self.window, self.scene.boundaries)
+        w0 = self.decomp.window[0]
+        self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
+        if self.ground is not None:
+            self.ground.bind(self.window)
+
+    def _local_speed(self):
+        v = self.particles["v"]
+        return float(np.sqrt((v * v).sum(axis=1)).max()) if len(v) else 0.0
+
+    def stable_dt(self, vmax):
+        """CFL time step C h / (c + |v|max), or the scene's fixed step."""
+        if self.scene.solver.time_step is not None:
+            return self.scene.solver.time_step
+        return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
+
+    def critical_dt(self):
+        """The largest stable step by the CFL rule with C = 1 (for warnings and messages), with
+        the particle speed at the last energy check that passed (a diverging run's speed means
+        nothing)."""
+        return self.grid.h / (self.wave_speed + self._vmax_healthy)
+
+    # -- arguments shared by the transfer kernels --------------------------------------------
+    def _geometry(self):
+        w, g = self.window, self.grid
+        return (w.G, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
+
+    def _scratch(self, name, shape):
+        arr = getattr(self, name, None)
+        if arr is None or arr.shape != shape:
+            arr = np.empty(shape)
+            setattr(self, name, arr)
+        return arr
+
+    # -- the phases --------------------------------------------------------------------------
+    def reset_grid(self):
+        """Step 1: zero the rank's grid window (owned and ghost nodes)."""
+        self.window.reset()
+
+    def particles_to_grid(self, momentum, forces):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
+        p = self.particles
+        gravity = self.loads.gravity if forces else None
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
+              gravity, None, None, None, *self._geometry())
+        point = self.loads.point_forces(p, self.t) if forces else None
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *self._geometry())
+
+    def exchange_halo(self, fields):
+        """HALO: ghost contributions summed into the owners, owners' totals copied back."""
+        view = self.window.G[..., fields]
+        self.decomp.accumulate(view)
+        self.decomp.fill(view)
+
+    def update_grid(self, dt):
+        """Steps 7-8 / eq. 3-4: (mv) += f dt (with damping if asked), essential BCs (moving
+        with the ground if asked); fields become v and dv."""
+        w = self.window
+        if self.ground is not None:
+            self.ground.apply(w, self.t + dt)
+        damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
+                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local)
+        self.damping_work += damped
+        self.external_work += reactions  # supports are external: their work enters the balance
+
+    def grid_velocity(self, source, target):
+        """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
+        w = self.window
+        K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
+                               0, w.shape[0], 0, w.shape[1])
+
+    def grid_to_particles(self, remap):
+        """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
+        p = self.particles
+        self._dx = self._scratch("_dx_buf", (p.n, 2))
+        vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
+                                   *self._geometry(), remap, self._dx, self._dt_step)
+        self._vmax_local, self._bad_local = vmax, bad
+
+    def update_strain(self, dt, velocity_field, move=True):
+        """Step 10 / eq. 6: strain increment, volume update, and (``move``) positions."""
+        p = self.particles
+        de = self._scratch("_de", (p.n, 3))
+        dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
+        self._de, self._dw = de, dw
+        self.external_work += K.g2p_kinematics(
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, velocity_field, self._dx if move else None, dt,
+            self.loads.gravity, None, None, None, *self._geometry())
+        if move:
+            self._point_load_work()
+
+    def move_particles(self, dt):
+        """Position update x += dt sum N v_i (USF: after the stress update)."""
+        p = self.particles
+        self.external_work += K.g2p_kinematics(
+            p["x"], p["m"], p["vol"], None, None, None, 1, self._dx, dt,
+            self.loads.gravity, None, None, None, *self._geometry())
+        self._point_load_work()
+
+    def _point_load_work(self):
+        """Work of the set forces over this step's moves (the forces of the step's start)."""
+        point = self.loads.point_forces(self.particles, self.t)
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            self.external_work += K.point_load_work(idx, self._dx, load_id, load_w, load_vec)
+
+    def update_stress(self):
+        """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
+        p = self.particles
+        if self._dw is not None:
+            K.jaumann_rotate(p["stress"], self._dw)
+        # internal work by the trapezoid rule, half before and half after the update; it closes
+        # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
+        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+        several = len(self.materials) > 1
+        for k, material in enumerate(self.materials):
+            state = {name: p.fields.get(name) for name in material.state_fields}
+            if self._dw is not None:
+                for name in material.tensor_state_fields:
+                    K.jaumann_rotate(p[name], self._dw)
+            material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
+        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+
+    # -- after the phases ---------------------------------------------------------------------
+    def _check_and_next_dt(self):
+        """One allreduce: the next time step (min over ranks) and every rank's troubles."""
+        g, d = self.grid, self.decomp
+        c0, c1 = d.owned
+        outside, leaving, inverted = K.count_strays(
+            self.particles["x"], self.particles["vol"], g.origin, g.inv_h, g.cells[0], g.cells[1],
+            self.axis, c0, min(c1, g.cells[self.axis]))
+        vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
+        bad = self._bad_local + inverted + (0 if math.isfinite(vmax) else 1)
+        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving], dtype=np.float64))
+        self.vmax = flags[0]
+        return int(flags[1]), int(flags[2]), int(flags[3])
+
+    def migrate(self, leaving):
+        """Step 11: particles that left the slab move to the neighbour with all their state."""
+        if leaving == 0:
+            return
+        p = self.particles
+        cols = K.cell_columns(p["x"], self.grid.origin, self.grid.inv_h, self.axis)
+        self.particles.fields = self.decomp.migrate(p.fields, self.decomp.owner_of_columns(cols))
+
+    def remove_outside(self):
+        """Drop particles that left the grid (scene: on_particle_exit = "remove")."""
+        keep = self.grid.inside(self.particles["x"])
+        self.removed += int(self.decomp.allreduce_sum(int((~keep).sum())))
+        self.particles = self.particles.take(keep)
+
+    def outside_report(self, limit=5):
+        """'id (x, y)' of particles outside the grid, from every rank (rank 0 gets the text)."""
+        p = self.particles
+        out = ~self.grid.inside(p["x"])
+        rows = [(int(i), float(x[0]), float(x[1])) for i, x in zip(p["id"][out][:limit], p["x"][out][:limit])]
+        rows = sum(self.comm.allgather(rows), [])[:limit]
+        return ", ".join(f"id {i} at ({x:.4g}, {y:.4g})" for i, x, y in rows)
+
+    def sort_particles(self):
+        """Order particles by cell so that neighbours in memory share grid nodes."""
+        w, g = self.window, self.grid
+        order = K.cell_order(self.particles["x"], g.origin, g.inv_h, w.ox, w.ox + w.shape[0],
+                             w.oy, w.oy + w.shape[1])
+        self.particles.reorder(order)
+
+    def rebalance(self):
+        """Move slab boundaries by the particle count per column if the imbalance is too big."""
+        par = self.scene.parallel
+        if par.rebalance_threshold is None or self.decomp.size == 1:
+            return False
+        if self.decomp.imbalance(self.particles.n) <= par.rebalance_threshold:
+            return False
+        cols = K.cell_columns(self.particles["x"], self.grid.origin, self.grid.inv_h, self.axis)
+        weights = np.bincount(cols, minlength=self.grid.nodes[self.axis]).astype(np.float64)
+        if not self.decomp.rebalance(self.decomp.allreduce_sum(weights)):
+            return False
+        dest = self.decomp.owner_of_columns(cols)
+        self.particles.fields = alltoallv_fields(self.comm, self.particles.fields, dest)
+        self._build_window()
+        self.rebalances += 1
+        return True
+
+    # -- one step ---------------------------------------------------------------------------
+    def step(self):
+        """Advance one time step; raises on instability or particles leaving the grid."""
+        cfg = self.scene.solver
+        if cfg.sort_interval and self.step_count % cfg.sort_interval == 0:
+            self.sort_particles()
+        dt = self.dt
+        remaining = cfg.end_time - self.t
+        if 0 < remaining < dt:  # land on the end time exactly
+            dt = remaining
+        self._dt_step = dt
+        self.scheme.advance(self, dt)
+        bad, outside, leaving = self._check_and_next_dt()
+        if bad:
+            raise UnstableRunError(f"non-finite velocity or inverted volume at t = {self.t + dt:.6g} s "
+                                   f"(step {self.step_count + 1}, dt = {dt:.3g} s; the stable step is "
+                                   f"about {self.critical_dt():.3g} s)")
+        if outside or (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0:
+            self.check_energy(dt)
+        if outside:
+            if cfg.on_particle_exit == "error":
+                raise ParticleExitError(f"{outside} particle(s) left the grid at t = {self.t + dt:.6g} s: "
+                                        f"{self.outside_report()}")
+            self.remove_outside()
+        self.migrate(leaving)
+        self.t += dt
+        self.step_count += 1
+        if self.step_count % self.scene.parallel.rebalance_interval == 0:
+            self.rebalance()
+        self.dt = self.stable_dt(self.vmax)
+        return dt
+
+    def check_energy(self, dt):
+        """Stop a run whose energy grows beyond what the loads put in (a diverging run grows
+        exponentially; a healthy one stays within a few percent)."""
+        e = self.energies()
+        supplied = self.initial_energy + e["external_work"]
+        scale = abs(self.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
+        # kinetic energy alone as well: a diverging run can turn volumes (and the internal work
+        # integrated over them) negative, which hides the growth in the total
+        grown = max(e["total"], e["kinetic"]) - supplied
+        if grown > ENERGY_GROWTH_LIMIT * scale and scale > 0:
+            raise UnstableRunError(
+                f"the run diverged at t = {self.t + dt:.6g} s (step {self.step_count + 1}): energy "
+                f"{e['total']:.4g} J exceeds the initial energy plus external work {supplied:.4g} J; "
+                f"dt = {dt:.3g} s, the stable step is about {self.critical_dt():.3g} s")
+        self._vmax_healthy = self.vmax
+
+    # -- reporting ----------------------------------------------------------------------------
+    def energies(self):
+        """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
+        work, internal work (integrated stress power: strain + dissipation, exact for any
+        material), external work, damping work, and ``total`` = kinetic + internal work +
+        damping work, which equals the external work plus the initial kinetic energy when the
+        run conserves energy."""
+        p = self.particles
+        kinetic = K.kinetic_energy(p["m"], p["v"])
+        several = len(self.materials) > 1
+        strain = sum(K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
+                     for k, m in enumerate(self.materials))
+        plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
+        ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(
+            np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work]))
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
+                "external_work": we, "damping_work": wd, "total": ke + wi + wd}

@@ -1,0 +1,64 @@
+"""After a run: CSV time histories and plots (rank 0 only)."""
+import logging
+import os
+
+import h5py
+import numpy as np
+
+__all__ = ["write_history_csv", "postprocess"]
+logger = logging.getLogger(__name__)
+
+
+def write_history_csv(h5_path, outdir):
+    """One CSV per tracked point: ``<track>[_<variant>].csv`` with t, ux, uy, vx, vy (SI units)."""
+    paths = []
+    with h5py.File(h5_path, "r") as f:
+        variant = f.attrs.get("variant", "")
+        if "history" not in f:
+            return paths
+        t = f["history/time"][:]
+        cols = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["history_columns"]]
+        for name in f["history"]:
+            if name == "time":
+                continue
+            data = f["history"][name][:]
+            keep = [cols.index(c) for c in ("ux", "uy", "vx", "vy")]
+            path = os.path.join(outdir, f"{name}{'_' + variant if variant else ''}.csv")
+            np.savetxt(path, np.column_stack([t, data[:, keep]]), delimiter=",",
+                       header="t,ux,uy,vx,vy", comments="", fmt="%.9g")
+            paths.append(path)
+    return paths
+
+
+def postprocess(scenes, h5_paths):
+    """CSV histories, history/energy plots of all variants (overlaid), each variant's
+    deformed-shape plot. ``scenes`` and ``h5_paths`` correspond one to one."""
+    from pmpm.io import plot_results
+    outdir = scenes[0].output.directory
+    made = []
+    for path in h5_paths:
+        made += write_history_csv(path, outdir)
+    made += plot_results(h5_paths, outdir)
+    for scene, path in zip(scenes, h5_paths):
+        if scene.output.deformed_plot:
+            made.append(_deformed(path, scene.output.deformed_plot, outdir))
+    for p in made:
+        logger.info("wrote %s", p)
+    return made
+
+
+def _deformed(h5_path, spec, outdir):
+    """Deformed shape at the frame where the tracked displacement is largest."""
+    from pmpm.io import plot_deformed
+    with h5py.File(h5_path, "r") as f:
+        variant = f.attrs.get("variant", "")
+        times = f["frames/time"][:]
+        ht = f["history/time"][:]
+        cols = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["history_columns"]]
+        u = np.abs(f["history"][spec["track"]][:, cols.index(spec["component"])])
+        t_peak = ht[int(np.argmax(u))]
+        frame = int(np.argmin(np.abs(times - t_peak)))
+        color = spec["color"] if f"frames/{spec['color']}" in f else "x"
+    out = os.path.join(outdir, f"deformed{'_' + variant if variant else ''}.png")
+    plot_deformed(h5_path, frame, color, spec["scale"], out)
+    return out

@@ -1,0 +1,182 @@
+"""Contact between bodies with friction: separate velocity fields per body.
+
+The default solver maps every particle to one nodal velocity field, so bodies whose shape
+function supports overlap share nodal velocities and stick together. With a ``[contact]``
+section the scene runs :class:`ContactSolver` instead, the multi-velocity-field algorithm of
+Bardenhagen, Brackbill & Sulsky (2000) and Bardenhagen et al. (2001):
+
+* each contact body (``contact.bodies``, default every body; the bodies not named share one
+  more field) maps its mass, momentum, force and mass gradient sum_p m_p grad N_i to its own
+  nodal fields, a *slot* of the body window ``B`` (:mod:`pmpm.core.kernels.contact`);
+* at nodes where two or more slots have mass, a slot approaching the centre of mass along the
+  contact normal loses its normal relative velocity, and its tangential relative velocity by at
+  most ``friction`` times that (Coulomb); separating bodies are left alone, components that an
+  essential BC constrains are not touched (the rule, the normal and the facing test are in
+  :mod:`pmpm.core.kernels.contact`);
+* the correction is made twice a step, as Uintah's friction contact does: on the momenta mapped
+  from the particles, so that the momentum update starts from a field without interpenetration
+  (this one is not passed on to the particles: their velocities change through the stresses the
+  held surfaces build up), and on the updated velocities, by the same amount on the velocity
+  change FLIP adds to the particles. The velocities from which USF and MUSL take the strain
+  increment are corrected the same way;
+* each slot's nodal update is the base solver's own (``Solver.update_grid`` and
+  ``Solver.grid_velocity`` run on each slot as if it were the single field: BCs, damping,
+  moving supports and their energy accounting included);
+* grid to particles, the MUSL re-map, the strain increment and the position update use each
+  particle's own slot.
+
+Everything else (materials, loads, migration, output, the schemes' ordering of the phases) is
+the base :class:`~pmpm.core.solver.Solver`'s. The per-body fields, mass gradient included, go through
+the same halo accumulate/fill as the single field. Without ``[contact]`` none of this is
+imported or run.
+"""
+import logging
+
+import numpy as np
+
+from pmpm.core.kernels import contact as KC
+from pmpm.core.solver import Solver
+
+__all__ = ["ContactSolver", "contact_slots"]
+logger = logging.getLogger(__name__)
+
+#: first single-field index (pmpm.core.kernels) that the body layout shifts to make room for the
+#: mass gradient, and by how much
+_FIRST_SHIFTED = 5
+_SHIFT = KC.REMAP - _FIRST_SHIFTED
+
+
+def contact_slots(scene):
+    """(slot of each body, number of slots): the bodies named in ``contact.bodies`` get a slot
+    each, in scene order; the others, if any, share the last one."""
+    own = set(scene.contact.bodies)
+    slot_of = np.empty(len(scene.bodies), dtype=np.int32)
+    k = 0
+    for b, body in enumerate(scene.bodies):
+        if body.name in own:
+            slot_of[b] = k
+            k += 1
+    rest = [b for b, body in enumerate(scene.bodies) if body.name not in own]
+    slot_of[rest] = k
+    return slot_of, k + (1 if rest else 0)
+
+
+def _field(f):
+    """Body-layout index of single-field index ``f`` (the schemes name fields in that layout)."""
+    return f if f < _FIRST_SHIFTED else f + _SHIFT
+
+
+class ContactSolver(Solver):
+    """Explicit MPM with one velocity field per contact body (scene ``[contact]``).
+
+    Parameters
+    ----------
+    scene : pmpm.scene.config.Scene
+        With ``scene.contact`` set.
+    comm : mpi4py communicator, optional
+    """
+
+    def __init__(self, scene, comm=None):
+        if scene.contact is None:
+            raise ValueError("ContactSolver needs a scene with a [contact] section")
+        self.friction = float(scene.contact.friction)
+        self.slot_of, self.n_slots = contact_slots(scene)
+        self.corrections = 0  # (node, slot) corrections on this rank, ghosts included
+        super().__init__(scene, comm)
+
+    def describe(self):
+        """One line for the log's list of effects."""
+        return f"contact with friction {self.friction:g} ({self.n_slots} velocity fields)"
+
+    # -- the body window ---------------------------------------------------------------------
+    def _build_window(self):
+        super()._build_window()
+        self.B = np.zeros((*self.window.shape, self.n_slots, KC.N_BODY_FIELDS))
+
+    def _body_geometry(self):
+        w, g = self.window, self.grid
+        return (self.B, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
+
+    def _halo_views(self, fields):
+        """Views of ``B`` for the single-field slice ``fields``: those fields of every slot; the
+        mass gradient travels with the mass."""
+        a, b = fields.start, fields.stop
+        a2, b2 = _field(a), (b if b <= _FIRST_SHIFTED else b + _SHIFT)
+        if a == 0 and b2 == KC.GRAD:  # mass .. force: one contiguous block with the gradient
+            return [self.B[..., a2:KC.GRAD + 2]]
+        views = [self.B[..., a2:b2]]
+        if a == 0:
+            views.append(self.B[..., KC.GRAD:KC.GRAD + 2])
+        return views
+
+    def _per_slot(self, phase, *args):
+        """Run a base-solver grid phase on each slot as if it were the single field."""
+        w = self.window
+        G = w.G
+        try:
+            for s in range(self.n_slots):
+                w.G = self.B[:, :, s]
+                phase(*args)
+        finally:
+            w.G = G
+
+    def _contact(self, vf, dvf, momentum=False):
+        w = self.window
+        if self.n_slots > 1:
+            self.corrections += KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff,
+                                                  self.friction, w.bc_mask, 0, w.shape[0], 0, w.shape[1])
+
+    # -- the phases that differ -----------------------------------------------------------------
+    def reset_grid(self):
+        self.B.fill(0.0)
+
+    def particles_to_grid(self, momentum, forces):
+        p = self.particles
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
+        KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
+                      p["stress"] if forces else None, p["body"], self.slot_of,
+                      gravity, load_id, load_w, load_vec, *self._body_geometry())
+
+    def exchange_halo(self, fields):
+        for view in self._halo_views(fields):
+            self.decomp.accumulate(view)
+            self.decomp.fill(view)
+
+    def update_grid(self, dt):
+        """Contact correction of the mapped momenta, each slot's momentum update with its BCs,
+        then the contact correction of the new velocities and of the velocity changes."""
+        self._contact(KC.MOM, -1, momentum=True)
+        self._per_slot(super().update_grid, dt)
+        self._contact(KC.MOM, KC.FORCE)
+
+    def grid_velocity(self, source, target):
+        """Each slot's v = (mv)/m with its BCs, then the contact correction (the velocity from
+        which USF and MUSL take the strain increment)."""
+        self._per_slot(super().grid_velocity, _field(source), _field(target))
+        self._contact(_field(target), -1)
+
+    def grid_to_particles(self, remap):
+        p = self.particles
+        self._dx = self._scratch("_dx_buf", (p.n, 2))
+        vmax, bad = KC.g2p_velocity_bodies(p["x"], p["m"], p["v"], p["body"], self.slot_of,
+                                           self.scene.solver.pic_blend, *self._body_geometry(),
+                                           remap, self._dx, self._dt_step)
+        self._vmax_local, self._bad_local = vmax, bad
+
+    def update_strain(self, dt, velocity_field, move=True):
+        p = self.particles
+        de = self._scratch("_de", (p.n, 3))
+        dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
+        self._de, self._dw = de, dw
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        self.external_work += KC.g2p_kinematics_bodies(
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, p["body"], self.slot_of,
+            _field(velocity_field), self._dx if move else None, dt,
+            gravity, load_id, load_w, load_vec, *self._body_geometry())
+
+    def move_particles(self, dt):
+        p = self.particles
+        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        self.external_work += KC.g2p_kinematics_bodies(
+            p["x"], p["m"], p["vol"], None, None, None, p["body"], self.slot_of,
+            KC.MOM, self._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())

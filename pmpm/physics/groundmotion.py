@@ -1,0 +1,123 @@
+"""Ground motion: a base-acceleration record imposed on the fixed base nodes.
+
+The record is read from a two-column text file (time, acceleration in m/s^2) or a PEER NGA
+``.AT2`` file (acceleration in g at a fixed DT, converted with g = 9.80665 m/s^2), scaled by
+``scale``. The ground velocity is the exact integral of the piecewise-linear acceleration; each
+step the nodes of the chosen ``fixed`` boundaries move with it along ``direction`` (the other
+component stays fixed), so a structure carried rigidly by the ground moves with no strain.
+"""
+import logging
+import os
+import re
+
+import numpy as np
+
+from pmpm.errors import ConfigError
+
+__all__ = ["GroundMotion", "read_record"]
+logger = logging.getLogger(__name__)
+
+G = 9.80665
+
+
+def _read_at2(path):
+    with open(path) as fh:
+        lines = fh.readlines()
+    header = " ".join(lines[:4]).upper()
+    npts = re.search(r"NPTS\s*=\s*(\d+)", header)
+    dt = re.search(r"DT\s*=\s*([0-9.Ee+-]+)", header)
+    if not (npts and dt):
+        raise ValueError("no 'NPTS=' and 'DT=' in the first four lines (PEER .AT2 header)")
+    values = np.array(" ".join(lines[4:]).replace(",", " ").split(), dtype=float)
+    n = int(npts.group(1))
+    if len(values) < n:
+        raise ValueError(f"header says NPTS={n} but the file holds {len(values)} values")
+    t = np.arange(n) * float(dt.group(1))
+    return t, values[:n] * G
+
+
+def _read_two_column(path):
+    data = np.loadtxt(path, comments=("#", "%"), delimiter=None, ndmin=2)
+    if data.shape[1] != 2:
+        raise ValueError(f"expected two columns (time, acceleration), found {data.shape[1]}")
+    t, a = data[:, 0], data[:, 1]
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("times must increase")
+    return t, a
+
+
+def read_record(path, fmt="auto"):
+    """(t, a) of an acceleration record in SI units; a ConfigError naming the file if unusable."""
+    if fmt == "auto":
+        fmt = "at2" if path.lower().endswith(".at2") else "two_column"
+    try:
+        t, a = _read_at2(path) if fmt == "at2" else _read_two_column(path)
+    except OSError as exc:
+        raise ConfigError(path, f"cannot read ground motion ({exc.strerror or exc})") from None
+    except ValueError as exc:
+        raise ConfigError(path, f"not a valid {fmt} acceleration record ({exc})") from None
+    if len(t) < 2 or not np.all(np.isfinite(a)):
+        raise ConfigError(path, "ground motion needs at least two finite samples")
+    return t, a
+
+
+class GroundMotion:
+    """The record, its velocity, and the base nodes it drives.
+
+    Parameters
+    ----------
+    config : dict
+        ``LoadsConfig.ground_motion``.
+    boundaries : sequence of BoundaryConfig
+    scene_dir : str
+        Relative record paths are relative to the scene file.
+    """
+
+    def __init__(self, config, boundaries, scene_dir):
+        path = config["file"]
+        path = path if os.path.isabs(path) else os.path.join(scene_dir, path)
+        self.t, a = read_record(path, config["format"])
+        self.a = a * config["scale"]
+        dt = np.diff(self.t)
+        self.v = np.concatenate([[0.0], np.cumsum(0.5 * (self.a[1:] + self.a[:-1]) * dt)])
+        self.direction = 0 if config["direction"] == "x" else 1
+        names = config["boundaries"] or [b.name for b in boundaries if b.type == "fixed"]
+        chosen = []
+        for name in names:
+            match = [b for b in boundaries if b.name == name]
+            if not match:
+                raise ConfigError("loads.ground_motion.boundaries", f"no [[boundary]] named {name!r}")
+            if match[0].type != "fixed":
+                raise ConfigError("loads.ground_motion.boundaries", f"boundary {name!r} is not 'fixed'")
+            chosen.append(match[0])
+        if not chosen:
+            raise ConfigError("loads.ground_motion", "needs a 'fixed' [[boundary]] to move")
+        self.boundaries = chosen
+        self.nodes = None
+
+    def describe(self):
+        return (f"ground motion along {'xy'[self.direction]}: {len(self.t)} samples over "
+                f"{self.t[-1]:g} s, peak {np.abs(self.a).max():.3g} m/s^2")
+
+    def velocity(self, time):
+        """Ground velocity at ``time`` (exact for piecewise-linear acceleration)."""
+        if time <= self.t[0]:
+            return 0.0
+        if time >= self.t[-1]:
+            return float(self.v[-1] + self.a[-1] * 0.0)
+        k = int(np.searchsorted(self.t, time) - 1)
+        tau = time - self.t[k]
+        h = self.t[k + 1] - self.t[k]
+        return float(self.v[k] + self.a[k] * tau + (self.a[k + 1] - self.a[k]) * tau * tau / (2 * h))
+
+    def bind(self, window):
+        """Find the window's nodes of the driven boundaries (after every window rebuild)."""
+        from pmpm.physics.boundary import select_nodes
+        sel = np.zeros(window.shape, dtype=bool)
+        for bc in self.boundaries:
+            sel |= select_nodes(window, bc)
+        self.nodes = np.nonzero(sel)
+
+    def apply(self, window, time):
+        """Set the driven nodes' prescribed velocity to the ground velocity at ``time``."""
+        window.bc_vel[self.nodes[0], self.nodes[1], self.direction] = self.velocity(time)

@@ -1,0 +1,95 @@
+"""External loads a scene asks for: gravity and total forces on particle sets.
+
+A force set is the particles whose initial position lies in a box; the set's total force
+(scaled by its time function) is shared among them by mass. Each particle belongs to at most
+one set, recorded in its ``load_id`` / ``load_w`` fields (they exist only when the scene has
+forces, and migrate with the particle). With no loads the kernels receive ``None`` and compile
+without the code.
+"""
+import logging
+
+import numpy as np
+
+from pmpm.errors import ConfigError
+from pmpm.physics.timefunctions import evaluate
+
+__all__ = ["Loads"]
+logger = logging.getLogger(__name__)
+
+
+def _in_box(x, lower, upper):
+    return np.all((x >= np.asarray(lower)) & (x <= np.asarray(upper)), axis=1)
+
+
+class Loads:
+    """Gravity vector and force sets of a scene.
+
+    Parameters
+    ----------
+    config : LoadsConfig
+    """
+
+    def __init__(self, config):
+        self.config = config
+        self.gravity = None if config.gravity is None else np.asarray(config.gravity, dtype=np.float64)
+        self.forces = config.forces
+        self._vec = np.zeros((len(self.forces), 2))
+        self._idx, self._idx_of = None, None
+
+    @property
+    def has_forces(self):
+        return bool(self.forces)
+
+    def describe(self):
+        """Effect lines for the start-up log."""
+        out = []
+        if self.gravity is not None:
+            out.append(f"gravity {tuple(self.gravity)}")
+        for f in self.forces:
+            out.append(f"force {f.name!r}: {f.force} N, {f.time_function['type']}")
+        return out
+
+    def assign(self, fields, allreduce_sum):
+        """Add ``load_id``/``load_w`` to the particle ``fields`` (all ranks call it)."""
+        if not self.forces:
+            return
+        x0, m = fields["x0"], fields["m"]
+        load_id = np.full(len(m), -1, dtype=np.int32)
+        load_w = np.zeros(len(m))
+        for k, f in enumerate(self.forces):
+            sel = _in_box(x0, f.lower, f.upper)
+            if np.any(sel & (load_id >= 0)):
+                other = self.forces[load_id[np.argmax(sel & (load_id >= 0))]].name
+                raise ConfigError(f"loads.forces[{k}]", f"box overlaps force {other!r} (a particle takes one set)")
+            total = allreduce_sum(float(m[sel].sum()))
+            if total <= 0:
+                raise ConfigError(f"loads.forces[{k}]", "box selects no particle")
+            load_id[sel] = k
+            load_w[sel] = m[sel] / total
+        fields["load_id"], fields["load_w"] = load_id, load_w
+
+    def kernel_args(self, particles, t):
+        """(gravity, load_id, load_w, load_vec) for kernels that take every load in their
+        particle loop (``None`` where absent). The main solver uses :meth:`point_forces`."""
+        if not self.forces:
+            return self.gravity, None, None, None
+        return self.gravity, particles["load_id"], particles["load_w"], self.vectors(t)
+
+    def vectors(self, t):
+        """(n_sets, 2) total force of every set at time ``t``."""
+        for k, f in enumerate(self.forces):
+            self._vec[k] = np.asarray(f.force) * evaluate(f.time_function, t)
+        return self._vec
+
+    def point_forces(self, particles, t):
+        """(idx, load_id, load_w, load_vec) of the loaded particles at time ``t``, or None.
+
+        ``idx`` is cached per ``load_id`` array: sorting and migration replace the particle
+        arrays, so a new array object means the indices must be found again."""
+        if not self.forces:
+            return None
+        load_id = particles["load_id"]
+        if self._idx_of is not load_id:
+            self._idx = np.flatnonzero(load_id >= 0).astype(np.int64)
+            self._idx_of = load_id
+        return self._idx, load_id, particles["load_w"], self.vectors(t)

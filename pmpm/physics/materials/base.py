@@ -1,0 +1,166 @@
+"""The material interface: parameters, per-particle state, a numba stress kernel.
+
+A material is chosen in the scene by ``type = "<name>"`` under ``[materials.<label>]``.
+Adding a model means one new module with a ``Material`` subclass and its ``@njit`` kernel.
+
+Conventions (Voigt, engineering shear):
+    stress  (N, 4)  [sxx, syy, sxy, szz]   szz stays 0 in plane stress
+    de      (N, 3)  [dexx, deyy, dgxy]      strain increment of this step
+"""
+import logging
+import math
+
+import numpy as np
+
+from pmpm.errors import ConfigError
+
+__all__ = ["Material", "KinematicHardening", "Params", "FORMULATIONS"]
+logger = logging.getLogger(__name__)
+
+FORMULATIONS = ("plane_stress", "plane_strain")
+
+
+class Params:
+    """Reads and validates one material's TOML table; every error names its key.
+
+    Parameters
+    ----------
+    table : dict
+        The material's TOML table (``type`` already removed).
+    key : str
+        Dotted key of the table, e.g. ``materials.steel``.
+    """
+
+    def __init__(self, table, key):
+        self._table = dict(table)
+        self._key = key
+        self._used = set()
+
+    def number(self, name, *, default=None, low=None, high=None, low_open=False, high_open=False):
+        """A float parameter with optional bounds (``low_open``: strictly greater)."""
+        self._used.add(name)
+        if name not in self._table:
+            if default is None:
+                raise ConfigError(f"{self._key}.{name}", "missing (required)")
+            return float(default)
+        value = self._table[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{self._key}.{name}", f"must be a finite number (got {value!r})")
+        value = float(value)
+        if low is not None and (value < low or (low_open and value == low)):
+            rel = ">" if low_open else ">="
+            raise ConfigError(f"{self._key}.{name}", f"must be {rel} {low:g} (got {value:g})")
+        if high is not None and (value > high or (high_open and value == high)):
+            rel = "<" if high_open else "<="
+            raise ConfigError(f"{self._key}.{name}", f"must be {rel} {high:g} (got {value:g})")
+        return value
+
+    def finish(self):
+        """Refuse keys the material does not know (typos must not pass silently)."""
+        unknown = sorted(set(self._table) - self._used)
+        if unknown:
+            raise ConfigError(f"{self._key}.{unknown[0]}", "unknown key for this material type")
+
+
+class Material:
+    """Base class of all materials (registry key: ``name``).
+
+    Subclasses set ``name``, ``state_fields`` and ``tensor_state_fields``, read their
+    parameters in ``__init__`` and implement ``update_stress``.
+    """
+
+    name = None
+    #: extra per-particle fields: name -> trailing shape (``()`` for a scalar); zero at start
+    state_fields = {}
+    #: state fields that rotate with the stress under the Jaumann rate (Voigt, same layout as stress)
+    tensor_state_fields = ()
+    #: state fields nothing in the step reads: kept only when the scene's output asks for them
+    #: (the kernel receives None otherwise and its update of the field is compiled out)
+    diagnostic_fields = ()
+    #: formulations the model supports
+    formulations = FORMULATIONS
+
+    def __init__(self, table, key, formulation):
+        if formulation not in self.formulations:
+            raise ConfigError(f"{key}.type", f"{self.name!r} does not support {formulation} "
+                              f"(supported: {', '.join(self.formulations)})")
+        self.key = key
+        self.formulation = formulation
+        p = Params(table, key)
+        self.E = p.number("E", low=0.0, low_open=True)
+        self.nu = p.number("nu", low=-1.0, high=0.5, low_open=True, high_open=True)
+        self.density = p.number("density", low=0.0, low_open=True)
+        self.read_params(p)
+        p.finish()
+
+    def read_params(self, p):
+        """Read the model's own parameters from ``p`` (a :class:`Params`)."""
+
+    # -- elasticity shared by every model ---------------------------------------------------
+    @property
+    def params(self):
+        """The float64 parameter vector handed to the numba kernel."""
+        return np.array([self.E, self.nu], dtype=np.float64)
+
+    @property
+    def plane_strain(self):
+        return self.formulation == "plane_strain"
+
+    def wave_speed(self):
+        """Elastic dilatational wave speed of the formulation (the CFL speed)."""
+        if self.plane_strain:
+            modulus = self.E * (1 - self.nu) / ((1 + self.nu) * (1 - 2 * self.nu))
+        else:
+            modulus = self.E / (1 - self.nu ** 2)
+        return math.sqrt(modulus / self.density)
+
+    def elastic_energy_density(self, stress):
+        """Recoverable strain energy per unit volume, 0.5 sigma : C^-1 : sigma, for (N, 4) stress."""
+        sxx, syy, sxy, szz = stress[:, 0], stress[:, 1], stress[:, 2], stress[:, 3]
+        E, nu = self.E, self.nu
+        normal = sxx ** 2 + syy ** 2 + szz ** 2 - 2 * nu * (sxx * syy + syy * szz + szz * sxx)
+        return 0.5 * normal / E + (1 + nu) / E * sxy ** 2
+
+    def describe(self):
+        """One line for the start-up log."""
+        return f"{self.name} (E={self.E:g}, nu={self.nu:g}, density={self.density:g})"
+
+    # -- the step --------------------------------------------------------------------------
+    def update_stress(self, stress, de, state, mat_ids, which):
+        """Advance ``stress`` (and ``state``) in place by the strain increments ``de``.
+
+        Parameters
+        ----------
+        stress : ndarray (N, 4)
+        de : ndarray (N, 3)
+        state : dict of ndarray or None
+            This material's ``state_fields`` arrays (first axis N); a ``diagnostic_fields``
+            entry is None when the run does not keep it.
+        mat_ids : ndarray (N,) int32
+            Material index of each particle.
+        which : int
+            Update only particles with ``mat_ids == which``; -1 updates all.
+        """
+        raise NotImplementedError
+
+
+class KinematicHardening(Material):
+    """Shared part of the von Mises models with Ziegler kinematic hardening: the plastic state
+    every particle carries and the two parameters they all read (not a material by itself)."""
+
+    state_fields = {"back_stress": (4,), "eps_p": (3,), "eps_p_eq": (), "plastic_work": ()}
+    tensor_state_fields = ("back_stress",)
+    # the plastic strain tensor is output only (24 bytes per particle); eps_p_eq stays, the
+    # default colour of the deformed-shape plot
+    diagnostic_fields = ("eps_p",)
+
+    def read_params(self, p):
+        """Read ``yield_stress`` and ``hardening``.
+
+        Parameters
+        ----------
+        p : Params
+        """
+        self.yield_stress = p.number("yield_stress", low=0.0, low_open=True)
+        # required: a silent default of 0 (perfect plasticity) would change results without notice
+        self.hardening = p.number("hardening", low=0.0, high=1.0, high_open=True)

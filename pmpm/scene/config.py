@@ -1,0 +1,463 @@
+"""The scene: ``case.toml`` parsed once, validated, and frozen into dataclasses.
+
+Every default is filled in here, so ``Scene.to_dict()`` is the complete resolved scene that is
+logged at start and written into every output file. The schema is documented in docs/scenes.md.
+Materials are validated by their own classes (``pmpm.physics.materials``); bodies are checked against
+the grid when the particles are generated (``pmpm.scene.bodies``).
+"""
+import dataclasses
+import logging
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from typing import Optional
+
+from pmpm.errors import ConfigError
+from pmpm.scene.tables import REQUIRED, Table
+from pmpm.physics.timefunctions import parse_time_function
+
+__all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES"]
+logger = logging.getLogger(__name__)
+
+SHAPE_NAMES = ("linear", "quadratic", "cubic")
+SCHEME_NAMES = ("usf", "usl", "musl")
+BODY_SHAPES = ("rectangle", "polygon", "circle", "i_section", "mesh")
+BC_TYPES = ("fixed", "roller_x", "roller_y", "velocity")
+FORMULATIONS = ("plane_stress", "plane_strain")
+PARTICLE_FIELDS = ("x", "x0", "v", "m", "vol", "stress", "strain", "mat", "body")
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    origin: tuple
+    cell_size: float
+    cells: tuple
+
+
+@dataclass(frozen=True)
+class BodyConfig:
+    name: str
+    shape: str
+    material: str
+    geometry: dict            # shape-specific keys, validated
+    particles_per_cell: int
+    thickness: float
+    velocity: tuple           # numbers or expression strings in x, y
+
+
+@dataclass(frozen=True)
+class BoundaryConfig:
+    name: str
+    type: str
+    lower: tuple
+    upper: tuple
+    velocity: tuple
+
+
+@dataclass(frozen=True)
+class ForceConfig:
+    name: str
+    lower: tuple
+    upper: tuple
+    force: tuple
+    time_function: dict
+
+
+@dataclass(frozen=True)
+class LoadsConfig:
+    gravity: Optional[tuple]
+    forces: tuple
+    ground_motion: Optional[dict] = None   # base acceleration record on the fixed nodes
+    damping: float = 0.0                   # mass-proportional damping coefficient (1/s)
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    shape_function: str
+    scheme: str
+    pic_blend: float
+    cfl: float
+    end_time: float
+    time_step: Optional[float]
+    mass_cutoff: float
+    large_rotations: bool
+    sort_interval: int
+    on_particle_exit: str
+    max_steps: Optional[int]
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    name: str
+    point: tuple
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    directory: str
+    interval: float
+    history_interval: float
+    fields: tuple
+    track: tuple
+    checkpoint_interval: Optional[float]
+    deformed_plot: Optional[dict]
+    progress_interval: float
+
+
+@dataclass(frozen=True)
+class ParallelConfig:
+    axis: str
+    rebalance_threshold: Optional[float]
+    rebalance_interval: int
+    io: str
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    friction: float
+    bodies: tuple             # names of the bodies with their own velocity field
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene; ``materials`` keeps each material's TOML table (validated)."""
+    path: str
+    title: str
+    formulation: str
+    thickness: float
+    grid: GridConfig
+    materials: dict
+    bodies: tuple
+    boundaries: tuple
+    loads: LoadsConfig
+    solver: SolverConfig
+    output: OutputConfig
+    parallel: ParallelConfig
+    contact: Optional[ContactConfig] = None
+    variants: dict = field(default_factory=dict)
+    variant: str = ""
+
+    def to_dict(self):
+        """The resolved scene as plain data (for logs and output attributes)."""
+        return dataclasses.asdict(self)
+
+    @property
+    def stem(self):
+        return os.path.splitext(os.path.basename(self.path))[0]
+
+
+# -- sections -------------------------------------------------------------------------------
+
+def _grid(t):
+    g = GridConfig(origin=t.vector("origin", (0.0, 0.0)),
+                   cell_size=t.number("cell_size", low=0, low_open=True),
+                   cells=t.int_vector("cells", low=3))
+    t.finish()
+    return g
+
+
+def _finite(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _velocity(t, name):
+    value = t.raw(name, [0.0, 0.0])
+    if (not isinstance(value, list) or len(value) != 2
+            or not all(isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value)):
+        raise ConfigError(t.path(name), "must be two numbers or expressions in x, y (e.g. \"0.1*sin(x)\")")
+    return tuple(float(v) if not isinstance(v, str) else v for v in value)
+
+
+def _geometry(t, shape):
+    """Read the shape-specific keys of a body."""
+    if shape == "rectangle":
+        geo = {"lower": t.vector("lower"), "upper": t.vector("upper")}
+        if any(u <= l for l, u in zip(geo["lower"], geo["upper"])):
+            raise ConfigError(t.path("upper"), "must be above lower in both coordinates")
+    elif shape == "polygon":
+        verts = t.raw("vertices")
+        if (not isinstance(verts, list) or len(verts) < 3
+                or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) for c in v) for v in verts)):
+            raise ConfigError(t.path("vertices"), "must be a list of at least 3 [x, y] points")
+        geo = {"vertices": tuple(tuple(float(c) for c in v) for v in verts)}
+    elif shape == "circle":
+        geo = {"center": t.vector("center"), "radius": t.number("radius", low=0, low_open=True)}
+    elif shape == "i_section":
+        geo = {"start": t.vector("start"), "end": t.vector("end"),
+               "depth": t.number("depth", low=0, low_open=True),
+               "flange_width": t.number("flange_width", low=0, low_open=True),
+               "flange_thickness": t.number("flange_thickness", low=0, low_open=True),
+               "web_thickness": t.number("web_thickness", low=0, low_open=True),
+               "area": t.number("area", None, low=0, low_open=True),
+               "inertia": t.number("inertia", None, low=0, low_open=True)}
+        if 2 * geo["flange_thickness"] >= geo["depth"]:
+            raise ConfigError(t.path("flange_thickness"), "two flanges must be thinner than the depth")
+        if geo["start"] == geo["end"]:
+            raise ConfigError(t.path("end"), "must differ from start")
+    else:  # mesh
+        geo = {"file": t.string("file"),
+               "particles_per_element": t.integer("particles_per_element", 1, low=1, high=16),
+               "scale": t.number("scale", 1.0, low=0, low_open=True),
+               "offset": t.vector("offset", (0.0, 0.0))}
+    return geo
+
+
+def _bodies(root, materials, ppc_default, thickness):
+    tables = root.tables("bodies")
+    if not tables:
+        raise ConfigError("bodies", "missing: a scene needs at least one [[bodies]] table")
+    bodies = []
+    for k, t in enumerate(tables):
+        shape = t.string("shape", choices=BODY_SHAPES)
+        material = t.string("material")
+        if material not in materials:
+            raise ConfigError(t.path("material"), f"no material {material!r} under [materials] "
+                                                  f"(defined: {', '.join(sorted(materials)) or 'none'})")
+        bodies.append(BodyConfig(
+            name=t.string("name", f"body{k}"), shape=shape, material=material,
+            geometry=_geometry(t, shape),
+            particles_per_cell=t.integer("particles_per_cell", ppc_default, low=1, high=8),
+            thickness=t.number("thickness", thickness, low=0, low_open=True),
+            velocity=_velocity(t, "velocity")))
+        t.finish()
+    return tuple(bodies)
+
+
+def _boundaries(root):
+    out = []
+    for k, t in enumerate(root.tables("boundary")):
+        kind = t.string("type", choices=BC_TYPES)
+        lower, upper = t.vector("lower"), t.vector("upper")
+        vel = t.vector("velocity", (0.0, 0.0)) if kind == "velocity" else (0.0, 0.0)
+        out.append(BoundaryConfig(name=t.string("name", f"boundary{k}"), type=kind,
+                                  lower=lower, upper=upper, velocity=vel))
+        t.finish()
+    return tuple(out)
+
+
+def _ground_motion(t):
+    """``[loads.ground_motion]``: an acceleration record applied to the fixed base nodes."""
+    if t is None:
+        return None
+    gm = {"file": t.string("file"),
+          "format": t.string("format", "auto", choices=("auto", "two_column", "at2")),
+          "direction": t.string("direction", "x", choices=("x", "y")),
+          "scale": t.number("scale", 1.0),
+          "boundaries": t.raw("boundaries", [])}
+    if not isinstance(gm["boundaries"], list) or not all(isinstance(b, str) for b in gm["boundaries"]):
+        raise ConfigError(t.path("boundaries"), "must be a list of [[boundary]] names")
+    t.finish()
+    return gm
+
+
+def _loads(root):
+    t = root.table("loads", None)
+    if t is None:
+        return LoadsConfig(gravity=None, forces=())
+    gravity = t.vector("gravity", None)
+    ground_motion = _ground_motion(t.table("ground_motion", None))
+    damping = t.number("damping", 0.0, low=0.0)
+    forces = []
+    for k, f in enumerate(t.tables("forces")):
+        forces.append(ForceConfig(
+            name=f.string("name", f"force{k}"), lower=f.vector("lower"), upper=f.vector("upper"),
+            force=f.vector("force"),
+            time_function=parse_time_function(f.table("time_function", {"type": "step"}))))
+        f.finish()
+    t.finish()
+    return LoadsConfig(gravity=gravity, forces=tuple(forces), ground_motion=ground_motion, damping=damping)
+
+
+def _solver(t):
+    s = SolverConfig(
+        shape_function=t.string("shape_function", "cubic", choices=SHAPE_NAMES),
+        scheme=t.string("scheme", "musl", choices=SCHEME_NAMES),
+        pic_blend=t.number("pic_blend", 0.0, low=0.0, high=1.0),
+        cfl=t.number("cfl", 0.5, low=0.0, high=1.0, low_open=True),
+        end_time=t.number("end_time", low=0.0, low_open=True),
+        time_step=t.number("time_step", None, low=0.0, low_open=True),
+        mass_cutoff=t.number("mass_cutoff", 1e-8, low=0.0, high=1.0),
+        large_rotations=t.boolean("large_rotations", False),
+        sort_interval=t.integer("sort_interval", 20, low=0),
+        on_particle_exit=t.string("on_particle_exit", "error", choices=("error", "remove")),
+        max_steps=t.integer("max_steps", None, low=1))
+    t.finish()
+    return s
+
+
+def _output(t, stem, end_time, state_fields=()):
+    t = t or Table({}, "output")
+    tracks = []
+    for k, tr in enumerate(t.tables("track")):
+        tracks.append(TrackConfig(name=tr.string("name", f"point{k}"), point=tr.vector("point")))
+        tr.finish()
+    names = [tr.name for tr in tracks]
+    if len(set(names)) != len(names):
+        raise ConfigError("output.track", "track names must be unique")
+    fields = t.raw("fields", ["x", "v", "stress"])
+    if not isinstance(fields, list) or not all(isinstance(f, str) for f in fields):
+        raise ConfigError("output.fields", "must be a list of field names")
+    known = ("id",) + PARTICLE_FIELDS + tuple(sorted(set(state_fields) - set(PARTICLE_FIELDS)))
+    for f in fields:
+        if f not in known:
+            raise ConfigError("output.fields", f"no particle field {f!r} in this scene (one of: {', '.join(known)})")
+    deformed = t.table("deformed_plot", None)
+    deformed_plot = None
+    if deformed is not None:
+        deformed_plot = {"track": deformed.string("track"),
+                         "component": deformed.string("component", "ux", choices=("ux", "uy")),
+                         "color": deformed.string("color", "eps_p_eq"),
+                         "scale": deformed.number("scale", 10.0, low=0, low_open=True)}
+        deformed.finish()
+        if deformed_plot["track"] not in names:
+            raise ConfigError("output.deformed_plot.track", f"no [[output.track]] named {deformed_plot['track']!r}")
+    out = OutputConfig(
+        directory=t.string("directory", f"{stem}_results"),
+        interval=t.number("interval", end_time / 20, low=0, low_open=True),
+        history_interval=t.number("history_interval", end_time / 1000, low=0, low_open=True),
+        fields=tuple(fields), track=tuple(tracks),
+        checkpoint_interval=t.number("checkpoint_interval", None, low=0, low_open=True),
+        deformed_plot=deformed_plot,
+        progress_interval=t.number("progress_interval", 2.0, low=0))
+    t.finish()
+    return out
+
+
+def _parallel(t):
+    t = t or Table({}, "parallel")
+    p = ParallelConfig(axis=t.string("axis", "auto", choices=("auto", "x", "y")),
+                       rebalance_threshold=t.number("rebalance_threshold", None, low=1.0, low_open=True),
+                       rebalance_interval=t.integer("rebalance_interval", 50, low=1),
+                       io=t.string("io", "mpio", choices=("mpio", "gather")))
+    t.finish()
+    return p
+
+
+def _contact(t, bodies):
+    if t is None:
+        return None
+    names = [b.name for b in bodies]
+    listed = t.raw("bodies", list(dict.fromkeys(names)))  # default: every body (names once)
+    if not isinstance(listed, list) or not listed or not all(isinstance(n, str) for n in listed):
+        raise ConfigError(t.path("bodies"), "must be a non-empty list of body names")
+    for n in listed:
+        if n not in names:
+            raise ConfigError(t.path("bodies"), f"no body named {n!r} (defined: {', '.join(names)})")
+    if len(set(listed)) != len(listed):
+        raise ConfigError(t.path("bodies"), "names a body twice")
+    c = ContactConfig(friction=t.number("friction", low=0.0), bodies=tuple(listed))
+    t.finish()
+    return c
+
+
+def _materials(root, formulation):
+    from pmpm.physics.materials import make_material
+    t = root.table("materials")
+    if not t.data:
+        raise ConfigError("materials", "empty: define at least one [materials.<label>] table")
+    resolved, state_fields = {}, set()
+    for label in t.data:
+        table = t.table(label)
+        material = make_material(table.data, table.key, formulation)  # validates
+        state_fields.update(material.state_fields)
+        resolved[label] = dict(table.data)
+    return resolved, state_fields
+
+
+def parse_scene(data, path="<scene>"):
+    """Validate the TOML ``data`` of a scene and return a frozen :class:`Scene`."""
+    root = Table(data, "")
+    title = root.string("title", os.path.basename(path))
+    formulation = root.string("formulation", "plane_stress", choices=FORMULATIONS)
+    thickness = root.number("thickness", 1.0, low=0, low_open=True)
+    ppc = root.integer("particles_per_cell", 2, low=1, high=8)
+    grid = _grid(root.table("grid"))
+    materials, state_fields = _materials(root, formulation)
+    solver = _solver(root.table("solver"))
+    stem = os.path.splitext(os.path.basename(path))[0]
+    variants = root.raw("variants", {})
+    if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
+        raise ConfigError("variants", "must be tables [variants.<name>] of dotted-key overrides")
+    scene = Scene(path=os.path.abspath(path) if path != "<scene>" else path, title=title,
+                  formulation=formulation, thickness=thickness, grid=grid, materials=materials,
+                  bodies=_bodies(root, materials, ppc, thickness), boundaries=_boundaries(root),
+                  loads=_loads(root), solver=solver,
+                  output=_output(root.table("output", None), stem, solver.end_time, state_fields),
+                  parallel=_parallel(root.table("parallel", None)), variants=variants)
+    scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
+    root.finish()
+    return scene
+
+
+def apply_overrides(data, overrides, where):
+    """Copy of TOML ``data`` with dotted-key ``overrides`` (``"materials.steel.type" = ...``)."""
+    import copy
+    data = copy.deepcopy(data)
+    for dotted, value in _flatten(overrides):
+        node = data
+        parts = dotted.split(".")
+        for part in parts[:-1]:
+            if isinstance(node, list):
+                try:
+                    node = node[int(part)]
+                except (ValueError, IndexError):
+                    raise ConfigError(f"{where}.{dotted}", f"no list entry {part!r}") from None
+            elif isinstance(node, dict):
+                node = node.setdefault(part, {})
+            else:
+                raise ConfigError(f"{where}.{dotted}", f"{part!r} is inside a value that is not a table")
+        if isinstance(node, list):
+            raise ConfigError(f"{where}.{dotted}", "cannot override a whole list entry")
+        if not isinstance(node, dict):
+            raise ConfigError(f"{where}.{dotted}", f"{parts[-2]!r} is not a table")
+        node[parts[-1]] = value
+    return data
+
+
+def _flatten(overrides, prefix=""):
+    """(dotted key, value) pairs: a bare dotted key (``solver.cfl = 0.3``) reaches TOML as nested
+    tables and must override that one key, not replace the whole ``[solver]`` table. A quoted
+    dotted key with a table value (``"materials.steel" = {type = ...}``) replaces that table."""
+    for key, value in overrides.items():
+        if isinstance(value, dict) and value and "." not in key:
+            yield from _flatten(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+def read_toml(path):
+    """Read a TOML file; unreadable or malformed files are a ConfigError naming the file."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except OSError as exc:
+        raise ConfigError(path, f"cannot read ({exc.strerror or exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(path, f"not valid TOML ({exc})") from None
+
+
+def load_scene(path, variant=None):
+    """Read and validate ``path``; with ``variant``, apply ``[variants.<variant>]`` first.
+
+    Returns a list of scenes: one per variant when the scene declares variants and none is
+    chosen, else one.
+    """
+    data = read_toml(path)
+    variants = data.get("variants", {})
+    if not variants:
+        if variant:
+            raise ConfigError("variants", f"scene has no variants (asked for {variant!r})")
+        return [parse_scene(data, path)]
+    if not isinstance(variants, dict):
+        raise ConfigError("variants", "must be tables [variants.<name>]")
+    names = [variant] if variant else list(variants)
+    scenes = []
+    for name in names:
+        if name not in variants:
+            raise ConfigError("variants", f"no variant {name!r} (defined: {', '.join(variants)})")
+        if not isinstance(variants[name], dict):
+            raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
+        scene = parse_scene(apply_overrides(data, variants[name], f"variants.{name}"), path)
+        scenes.append(dataclasses.replace(scene, variant=name))
+    return scenes

@@ -1,5 +1,0 @@
-"""Studies: scripted parameter sweeps over the shipped cases (run them with ``python -m``).
-
-- :mod:`pmpm.studies.frame_resolution`: the portal frame at several cell sizes, elastic and
-  elastoplastic (docs/portal_frame.md, "Resolution study").
-"""
