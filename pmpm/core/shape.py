@@ -19,15 +19,33 @@ grid. For the cubic spline the result is exactly Steffen's modified cubic B-spli
 
 K (the stencil width) is 2 (linear), 3 (quadratic) and 4 (cubic); the ghost width a slab needs
 is 1, 2 and 2 node columns (a particle in cell c touches nodes c-1 .. c+2 at most).
+
+Domain interpolation (``solver.interpolation = "ugimp"`` or ``"cpgimp"``, cubic only): the
+B-spline GIMP. Each particle carries the half-lengths (lx, ly) of its rectangular domain, in
+cell units; its weight of node i along an axis is the node's cubic B-spline averaged over the
+domain, S_i(s) = 1/(b - a) * integral_a^b N_i, with [a, b] = [s - l, s + l]. The average is exact
+(the antiderivative of the cubic B-spline is a piecewise quartic), and its derivative is
+(N_i(b) - N_i(a)) / (b - a). A particle's support widens by l on each side, so K = 5 for
+l <= 1/2 (the half-lengths are capped there) and the ghost width is 3 (a particle in cell c
+touches nodes c-2 .. c+3). At the grid edges the domain is clamped to the grid, [a, b] =
+[max(s - l, 0), min(s + l, n)] (the part of a particle's domain outside the grid holds no
+material), and the boundary-modified splines above are averaged over it: since they sum to 1 on
+[0, n], so does their average, which keeps the partition of unity for every particle in the
+grid. Linear completeness holds in the interior; within l of an edge the weights reproduce the
+centre of the clamped domain instead of s (a shift of at most l / 2). ``ugimp`` keeps the initial
+half-lengths; ``cpgimp`` stretches each with the diagonal of the strain increment (the domain
+follows the material's stretch along the axes).
 """
 import math
 
 import numba as nb
 import numpy as np
+from numba import types
 from numba.extending import overload
 
-__all__ = ["SHAPES", "SHAPE_TAGS", "weights", "block_weights", "BLOCK", "linear", "quadratic",
-           "cubic", "block_coordinates", "ghost_width", "min_cells"]
+__all__ = ["SHAPES", "SHAPE_TAGS", "INTERPOLATIONS", "weights", "particle_weights", "block_weights",
+           "block_domain", "stencil", "BLOCK", "linear", "quadratic", "cubic", "cubic_gimp",
+           "block_coordinates", "ghost_width", "min_cells", "shape_argument", "MAX_HALF_LENGTH"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -83,6 +101,80 @@ def cubic(s, n):
     return c - 1, (w0, w1, w2, w3), (g0, g1, g2, g3)
 
 
+# -- B-spline GIMP (cubic) ------------------------------------------------------------------
+
+#: largest domain half-length, in cells: keeps the support within 5 nodes per axis
+MAX_HALF_LENGTH = 0.5
+
+
+@nb.njit(cache=True, inline="always")
+def _spline_and_integral(x):
+    """The cubic B-spline N(x) centred on 0 and its antiderivative Phi(x) = int_{-2}^x N,
+    branch-free: with u = |x|, N = ((2-u)_+^3 - 4 (1-u)_+^3) / 6 and
+    Phi = 1/2 + sign(x) P(u), P(u) = int_0^u N = Q(min(u, 1)) + (1 - (2 - max(u, 1))_+^4) / 24,
+    Q(t) = 2t/3 - t^3/3 + t^4/8 (the integral over the inner piece)."""
+    u = abs(x)
+    p = max(2.0 - u, 0.0)
+    r = max(1.0 - u, 0.0)
+    n_ = (p * p * p - 4.0 * r * r * r) * (1.0 / 6.0)
+    t = min(u, 1.0)
+    t2 = t * t
+    q = t * (2.0 / 3.0) - t2 * t * (1.0 / 3.0) + t2 * t2 * 0.125
+    e = min(max(2.0 - max(u, 1.0), 0.0), 1.0)
+    e2 = e * e
+    half = q + (1.0 - e2 * e2) * (1.0 / 24.0)
+    return n_, 0.5 + math.copysign(half, x)
+
+
+@nb.njit(cache=True, inline="always")
+def _averaged(i, a, b, da, db, inv_len):
+    """Node i's (unmodified) cubic B-spline averaged over [a, b], and its derivative by the
+    particle coordinate when the ends move with it at rates da, db (0 where clamped)."""
+    na, pa = _spline_and_integral(a - i)
+    nb_, pb = _spline_and_integral(b - i)
+    w = (pb - pa) * inv_len
+    return w, (nb_ * db - na * da - w * (db - da)) * inv_len
+
+
+@nb.njit(cache=True)
+def cubic_gimp(s, l, n):
+    """B-spline GIMP weights of a particle at ``s`` with domain half-length ``l`` (cell units,
+    0 < l <= 1/2): 5 nodes per axis, the domain clamped to the grid and the boundary-modified
+    cubic B-splines averaged over it (see the module docstring)."""
+    a = s - l
+    da = 1.0
+    if not a > 0.0:  # also NaN: clamped (a diverged particle must not index outside the grid)
+        a = 0.0
+        da = 0.0
+    elif not a < n:  # a particle beyond the far edge (the step stops it afterwards)
+        a = n - 1.0
+        da = 0.0
+    b = s + l
+    db = 1.0
+    if not b < n:
+        b = float(n)
+        db = 0.0
+    if not b > a:
+        b = a + 1e-9
+    inv_len = 1.0 / (b - a)
+    c = min(max(int(math.floor(a)), 0), n - 1)
+    st = c - 1
+    w0, g0 = _averaged(st, a, b, da, db, inv_len)
+    w1, g1 = _averaged(st + 1, a, b, da, db, inv_len)
+    w2, g2 = _averaged(st + 2, a, b, da, db, inv_len)
+    w3, g3 = _averaged(st + 3, a, b, da, db, inv_len)
+    w4, g4 = _averaged(st + 4, a, b, da, db, inv_len)
+    # eliminate the ghost nodes -1 and n+1 (v_ghost = 2 v_edge - v_inner) as in ``cubic`` and
+    # slide the 5-node window back onto the grid
+    if st < 0:  # node -1 is w0; node 4 (w4) cannot be reached from a < 1
+        return 0, (w1 + 2 * w0, w2 - w0, w3, w4, 0.0), (g1 + 2 * g0, g2 - g0, g3, g4, 0.0)
+    if st + 4 == n + 1:  # node n+1 is w4
+        return n - 4, (0.0, w0, w1, w2 - w4, w3 + 2 * w4), (0.0, g0, g1, g2 - g4, g3 + 2 * g4)
+    if st + 4 == n + 2:  # node n+1 is w3, node n+2 (w4) is out of reach
+        return n - 4, (0.0, 0.0, w0, w1 - w3, w2 + 2 * w3), (0.0, 0.0, g0, g1 - g3, g2 + 2 * g3)
+    return st, (w0, w1, w2, w3, w4), (g0, g1, g2, g3, g4)
+
+
 #: name in the scene -> kernel
 SHAPES = {"linear": linear, "quadratic": quadratic, "cubic": cubic}
 
@@ -91,6 +183,41 @@ SHAPES = {"linear": linear, "quadratic": quadratic, "cubic": cubic}
 #: specialised, cacheable machine code. (Passing the jitted function itself would work too,
 #: but its type embeds a memory address and defeats numba's on-disk cache.)
 SHAPE_TAGS = {"linear": (0.0,) * 2, "quadratic": (0.0,) * 3, "cubic": (0.0,) * 4}
+
+#: ``solver.interpolation``: point B-splines, or B-spline GIMP with fixed (uGIMP) or stretching
+#: (cpGIMP) particle domains
+INTERPOLATIONS = ("point", "ugimp", "cpgimp")
+#: the shape functions each domain interpolation is defined for
+GIMP_SHAPES = ("cubic",)
+#: the tag of the cubic GIMP (5 nodes per axis); the kernels receive ``(GIMP_TAG, domain)``,
+#: ``domain`` the (N, 2) half-lengths in cell units, a particle field
+GIMP_TAG = (0.0,) * 5
+
+
+def shape_argument(name, interpolation="point", domain=None):
+    """What the transfer kernels take as ``shape``: the point tag, or ``(GIMP_TAG, domain)``."""
+    if interpolation == "point":
+        return SHAPE_TAGS[name]
+    return (GIMP_TAG, domain)
+
+
+def _is_gimp(shape):
+    """At compile time: is the numba type of ``shape`` the GIMP pair (tag, domain array)?"""
+    return isinstance(shape, types.BaseTuple) and not isinstance(shape, types.UniTuple) \
+        and len(shape) == 2 and isinstance(shape[1], types.Array)
+
+
+def stencil(shape):
+    """Nodes per axis of a particle's support (K)."""
+    return 5 if isinstance(shape[0], tuple) else len(shape)
+
+
+@overload(stencil)
+def _stencil_overload(shape):
+    if _is_gimp(shape):
+        return lambda shape: 5
+    count = shape.count
+    return lambda shape: count
 
 
 def weights(tag, s, n):
@@ -108,6 +235,21 @@ def _weights_overload(tag, s, n):
     if count == 4:
         return lambda tag, s, n: cubic(s, n)
     return None
+
+
+def particle_weights(shape, s, n, p, axis):
+    """``start, w, g`` of particle ``p`` along ``axis`` (``s`` its coordinate in cell units) for
+    point tags and the GIMP pair alike."""
+    if isinstance(shape[0], tuple):
+        return cubic_gimp(s, shape[1][p, axis], n)
+    return weights(shape, s, n)
+
+
+@overload(particle_weights)
+def _particle_weights_overload(shape, s, n, p, axis):
+    if _is_gimp(shape):
+        return lambda shape, s, n, p, axis: cubic_gimp(s, shape[1][p, axis], n)
+    return lambda shape, s, n, p, axis: weights(shape, s, n)
 
 
 # -- a block of particles at a time --------------------------------------------------------
@@ -184,6 +326,29 @@ def _cubic_block(s, nq, n, start, W):
             _put(W, q, start, i0, w, g)
 
 
+@nb.njit(cache=True)
+def _cubic_gimp_block(s, L, nq, n, start, W):
+    """The interior GIMP weights in closed form (the domain inside the grid, the support away
+    from the ghost nodes: no clamping, 1 / (b - a) = 1 / (2 l)); the rest by ``cubic_gimp``."""
+    for q in range(nq):
+        l = L[q]
+        a = s[q] - l
+        b = s[q] + l
+        c = math.floor(a)
+        inv = 0.5 / l
+        for k in range(5):
+            i = c - 1.0 + k
+            na, pa = _spline_and_integral(a - i)
+            nb_, pb = _spline_and_integral(b - i)
+            W[k, q] = (pb - pa) * inv
+            W[5 + k, q] = (nb_ - na) * inv
+        start[q] = np.int64(c) - 1
+    for q in range(nq):
+        if start[q] < 0 or start[q] + 4 > n or not abs(s[q]) < _HUGE:
+            i0, w, g = cubic_gimp(s[q], L[q], n)
+            _put(W, q, start, i0, w, g)
+
+
 @nb.njit(cache=True, inline="always")
 def _put(W, q, start, i0, w, g):
     start[q] = i0
@@ -192,23 +357,46 @@ def _put(W, q, start, i0, w, g):
         W[len(w) + k, q] = g[k]
 
 
-def block_weights(tag, s, nq, n, start, W):
+def block_weights(tag, s, L, nq, n, start, W):
     """Weights of the ``nq`` coordinates ``s`` (cell units) of the basis named by ``tag``:
     ``start[q]`` the first node, ``W[k, q]`` the weight of node start + k and ``W[K + k, q]``
-    its derivative (K = len(tag)); the block form of ``weights``."""
-    {2: _linear_block, 3: _quadratic_block, 4: _cubic_block}[len(tag)](s, nq, n, start, W)
+    its derivative (K = stencil(tag)); the block form of ``weights``. ``L`` holds the block's
+    domain half-lengths along this axis (GIMP only; see ``block_domain``)."""
+    if isinstance(tag[0], tuple):
+        _cubic_gimp_block(s, L, nq, n, start, W)
+    else:
+        {2: _linear_block, 3: _quadratic_block, 4: _cubic_block}[len(tag)](s, nq, n, start, W)
 
 
 @overload(block_weights)
-def _block_weights_overload(tag, s, nq, n, start, W):
+def _block_weights_overload(tag, s, L, nq, n, start, W):
+    if _is_gimp(tag):
+        return lambda tag, s, L, nq, n, start, W: _cubic_gimp_block(s, L, nq, n, start, W)
     count = tag.count
     if count == 2:
-        return lambda tag, s, nq, n, start, W: _linear_block(s, nq, n, start, W)
+        return lambda tag, s, L, nq, n, start, W: _linear_block(s, nq, n, start, W)
     if count == 3:
-        return lambda tag, s, nq, n, start, W: _quadratic_block(s, nq, n, start, W)
+        return lambda tag, s, L, nq, n, start, W: _quadratic_block(s, nq, n, start, W)
     if count == 4:
-        return lambda tag, s, nq, n, start, W: _cubic_block(s, nq, n, start, W)
+        return lambda tag, s, L, nq, n, start, W: _cubic_block(s, nq, n, start, W)
     return None
+
+
+def block_domain(shape, p0, nq, axis, L):
+    """L[q] = the domain half-length of particle p0 + q along ``axis`` (GIMP; else nothing)."""
+    if isinstance(shape[0], tuple):
+        L[:nq] = shape[1][p0:p0 + nq, axis]
+
+
+@overload(block_domain)
+def _block_domain_overload(shape, p0, nq, axis, L):
+    if _is_gimp(shape):
+        def copy(shape, p0, nq, axis, L):
+            d = shape[1]
+            for q in range(nq):
+                L[q] = d[p0 + q, axis]
+        return copy
+    return lambda shape, p0, nq, axis, L: None
 
 
 @nb.njit(cache=True, inline="always")
@@ -218,11 +406,17 @@ def block_coordinates(x, p0, nq, axis, origin, inv_h, s):
         s[q] = (x[p0 + q, axis] - origin) * inv_h
 
 
-def ghost_width(name):
-    """Node columns a slab must borrow from each neighbour for this basis."""
+def ghost_width(name, interpolation="point"):
+    """Node columns a slab must borrow from each neighbour for this basis (GIMP: a particle in
+    cell c reaches nodes c-2 .. c+3)."""
+    if interpolation != "point":
+        return 3
     return {"linear": 1, "quadratic": 2, "cubic": 2}[name]
 
 
-def min_cells(name):
-    """Fewest cells per axis for which the boundary modification is well defined."""
+def min_cells(name, interpolation="point"):
+    """Fewest cells per axis for which the boundary modification is well defined (GIMP: the
+    5-node window must fit on the grid)."""
+    if interpolation != "point":
+        return 4
     return {"linear": 1, "quadratic": 2, "cubic": 3}[name]

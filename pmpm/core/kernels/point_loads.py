@@ -6,7 +6,7 @@ kernels visit only the loaded particles (their indices ``idx``).
 """
 import numba as nb
 
-from pmpm.core.shape import weights
+from pmpm.core.shape import particle_weights
 
 __all__ = ["scatter_point_loads", "point_load_work"]
 
@@ -19,8 +19,8 @@ def scatter_point_loads(idx, x, load_id, load_w, load_vec, G, ox, oy, origin, in
         k = load_id[p]
         fx = load_w[p] * load_vec[k, 0]
         fy = load_w[p] * load_vec[k, 1]
-        i0, wx, _ = weights(shape, (x[p, 0] - origin[0]) * inv_h, ncx)
-        j0, wy, _ = weights(shape, (x[p, 1] - origin[1]) * inv_h, ncy)
+        i0, wx, _ = particle_weights(shape, (x[p, 0] - origin[0]) * inv_h, ncx, p, 0)
+        j0, wy, _ = particle_weights(shape, (x[p, 1] - origin[1]) * inv_h, ncy, p, 1)
         for a in range(len(wx)):
             for b in range(len(wy)):
                 w = wx[a] * wy[b]

@@ -12,7 +12,7 @@ weight of node (I0[q] + a, J0[q] + b) is WX[a, q] * WY[b, q], its gradient in ce
 import numba as nb
 import numpy as np
 
-from pmpm.core.shape import BLOCK, block_coordinates, block_weights
+from pmpm.core.shape import BLOCK, block_coordinates, block_domain, block_weights, stencil
 
 __all__ = ["p2g", "g2p_velocity", "g2p_kinematics"]
 
@@ -65,19 +65,24 @@ def move(p, x, dx, m, gravity, load_id, load_w, load_vec):
 
 @nb.njit(cache=True, inline="always")
 def _buffers(shape):
-    """Per-block scratch: coordinates, first nodes and weights/derivatives along x and y."""
-    k2 = 2 * len(shape)
-    return (np.empty(BLOCK), np.empty(BLOCK, np.int64), np.empty(BLOCK, np.int64),
+    """Per-block scratch: coordinates and domain half-lengths (GIMP), first nodes and
+    weights/derivatives along x and y."""
+    k2 = 2 * stencil(shape)
+    return (np.empty((2, BLOCK)), np.empty(BLOCK, np.int64), np.empty(BLOCK, np.int64),
             np.empty((k2, BLOCK)), np.empty((k2, BLOCK)))
 
 
 @nb.njit(cache=True, inline="always")
 def _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY):
-    """Weights of particles p0 .. p0 + nq - 1 into I0, WX (x axis) and J0, WY (y axis)."""
-    block_coordinates(x, p0, nq, 0, origin[0], inv_h, S)
-    block_weights(shape, S, nq, ncx, I0, WX)
-    block_coordinates(x, p0, nq, 1, origin[1], inv_h, S)
-    block_weights(shape, S, nq, ncy, J0, WY)
+    """Weights of particles p0 .. p0 + nq - 1 into I0, WX (x axis) and J0, WY (y axis);
+    S[0] takes the coordinates, S[1] the domain half-lengths (GIMP only)."""
+    s, L = S[0], S[1]
+    block_coordinates(x, p0, nq, 0, origin[0], inv_h, s)
+    block_domain(shape, p0, nq, 0, L)
+    block_weights(shape, s, L, nq, ncx, I0, WX)
+    block_coordinates(x, p0, nq, 1, origin[1], inv_h, s)
+    block_domain(shape, p0, nq, 1, L)
+    block_weights(shape, s, L, nq, ncy, J0, WY)
 
 
 @nb.njit(cache=True)
@@ -86,7 +91,7 @@ def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
     """Scatter mass and momentum (``v`` not None), internal force (``stress`` not None) and
     external force (``gravity``/``load_id`` not None) into the grid window ``G``."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = len(shape)
+    K = stencil(shape)
     S, I0, J0, WX, WY = _buffers(shape)
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
@@ -141,7 +146,7 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap,
     vmax2 = 0.0
     bad = 0
     flip = 1.0 - pic
-    K = len(shape)
+    K = stencil(shape)
     S, I0, J0, WX, WY = _buffers(shape)
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
@@ -199,7 +204,7 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
     ``strain`` are updated with it); ``dw`` (N,) the spin increment when not None (objective stress rate).
     Returns the work of the external forces over the moves."""
     work = 0.0
-    K = len(shape)
+    K = stencil(shape)
     S, I0, J0, WX, WY = _buffers(shape)
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
