@@ -18,7 +18,7 @@ import numpy as np
 
 from decomposition import alltoallv_fields, get_comm
 from pmpm.core import kernels as K
-from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
+from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, face_node_sets
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow
 from pmpm.physics.groundmotion import GroundMotion
@@ -27,7 +27,7 @@ from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
 from pmpm.core.particles import OPTIONAL_FIELDS
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
-from pmpm.core.shape import SHAPE_TAGS, ghost_width, min_cells
+from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
 from pmpm.errors import ConfigError
 
 __all__ = ["Solver"]
@@ -59,10 +59,12 @@ class Solver:
         self.comm = get_comm(comm)
         cfg = scene.solver
         self.grid = Grid(scene.grid.origin, scene.grid.cell_size, scene.grid.cells)
-        if min(self.grid.cells) < min_cells(cfg.shape_function):
-            raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines need at least "
-                                            f"{min_cells(cfg.shape_function)} cells per axis")
-        self.shape = SHAPE_TAGS[cfg.shape_function]
+        self.interpolation = cfg.interpolation
+        need = min_cells(cfg.shape_function, cfg.interpolation)
+        if min(self.grid.cells) < need:
+            raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines"
+                              f"{'' if cfg.interpolation == 'point' else ' with ' + cfg.interpolation}"
+                              f" need at least {need} cells per axis")
         self.labels = list(scene.materials)
         self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
                           for k in self.labels]
@@ -73,13 +75,17 @@ class Solver:
                        if scene.loads.ground_motion else None)
         self.damping = scene.loads.damping or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
+        self._node_sets = face_node_sets(scene.boundaries, scene.bodies, self.grid, points,
+                                         lambda idx: self._points_shape(points, idx))
         self.n_total = len(points["m"])
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
-                                         ghost_width(cfg.shape_function), points["x"])
+                                         ghost_width(cfg.shape_function, cfg.interpolation), points["x"])
         optional = [f for f in scene.output.fields
                     if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
+        if self.interpolation != "point":
+            self._add_domains()
         del points
         self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
         self._build_window()
@@ -105,11 +111,37 @@ class Solver:
 
     def _build_window(self):
         self.window = GridWindow(self.grid, self.axis, self.decomp.window)
+        self.window.node_sets = self._node_sets   # body-attached boundaries' global node masks
         apply_boundary_masks(self.window, self.scene.boundaries)
         w0 = self.decomp.window[0]
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
         if self.ground is not None:
             self.ground.bind(self.window)
+
+    def _initial_domains(self, vol, body):
+        """The GIMP particle domains: half-lengths (cells) of the square of the particle's area,
+        (h / ppc) / 2 for a body filled on a lattice, capped at ``MAX_HALF_LENGTH``."""
+        thickness = np.array([b.thickness for b in self.scene.bodies])[body]
+        half = 0.5 * np.sqrt(vol / thickness) * self.grid.inv_h
+        return np.repeat(np.minimum(half, MAX_HALF_LENGTH)[:, None], 2, axis=1)
+
+    def _add_domains(self):
+        p = self.particles
+        p["domain"] = self._initial_domains(p["vol"], p["body"])
+
+    def _points_shape(self, points, idx):
+        """The kernels' ``shape`` for the scene points ``idx`` at the start (set-up only)."""
+        domain = (self._initial_domains(points["vol"][idx], points["body"][idx])
+                  if self.interpolation != "point" else None)
+        return shape_argument(self.scene.solver.shape_function, self.interpolation, domain)
+
+    @property
+    def shape(self):
+        """The ``shape`` argument of the transfer kernels: the point B-spline tag, or the GIMP
+        pair (tag, the particles' current domain array: rebuilt since sorting and migration
+        replace the arrays)."""
+        return shape_argument(self.scene.solver.shape_function, self.interpolation,
+                              self.particles.fields.get("domain"))
 
     def _local_speed(self):
         v = self.particles["v"]
@@ -195,8 +227,17 @@ class Solver:
         self.external_work += K.g2p_kinematics(
             p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, velocity_field, self._dx if move else None, dt,
             self.loads.gravity, None, None, None, *self._geometry())
+        if self.interpolation == "cpgimp":
+            self._stretch_domains(de)
         if move:
             self._point_load_work()
+
+    def _stretch_domains(self, de):
+        """cpGIMP: each half-length follows the material's stretch along its axis, l *= 1 + de_ii
+        (the diagonal of the step's I + dt L), capped at ``MAX_HALF_LENGTH`` (the 5-node support)."""
+        d = self.particles["domain"]
+        d *= 1.0 + de[:, :2]
+        np.clip(d, 1e-6, MAX_HALF_LENGTH, out=d)
 
     def move_particles(self, dt):
         """Position update x += dt sum N v_i (USF: after the stress update)."""

@@ -16,6 +16,7 @@ from typing import Optional
 from pmpm.errors import ConfigError
 from pmpm.scene.tables import REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
+from pmpm.core.shape import GIMP_SHAPES, INTERPOLATIONS
 
 __all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES"]
 logger = logging.getLogger(__name__)
@@ -24,6 +25,7 @@ SHAPE_NAMES = ("linear", "quadratic", "cubic")
 SCHEME_NAMES = ("usf", "usl", "musl")
 BODY_SHAPES = ("rectangle", "polygon", "circle", "i_section", "mesh")
 BC_TYPES = ("fixed", "roller_x", "roller_y", "velocity")
+BOUNDARY_FACES = ("left", "right", "bottom", "top")
 FORMULATIONS = ("plane_stress", "plane_strain")
 PARTICLE_FIELDS = ("x", "x0", "v", "m", "vol", "stress", "strain", "mat", "body")
 
@@ -50,9 +52,11 @@ class BodyConfig:
 class BoundaryConfig:
     name: str
     type: str
-    lower: tuple
-    upper: tuple
+    lower: Optional[tuple]    # the box (None for a boundary attached to a body's face)
+    upper: Optional[tuple]
     velocity: tuple
+    body: Optional[str] = None   # body-attached: the body's name and its face (pmpm.physics.boundary)
+    face: Optional[str] = None
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,7 @@ class SolverConfig:
     sort_interval: int
     on_particle_exit: str
     max_steps: Optional[int]
+    interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp" (pmpm.core.shape)
 
 
 @dataclass(frozen=True)
@@ -228,10 +233,19 @@ def _boundaries(root):
     out = []
     for k, t in enumerate(root.tables("boundary")):
         kind = t.string("type", choices=BC_TYPES)
-        lower, upper = t.vector("lower"), t.vector("upper")
+        body = face = None
+        if t.has("body"):
+            body = t.string("body")
+            face = t.string("face", choices=BOUNDARY_FACES)
+            for key in ("lower", "upper"):
+                if t.has(key):
+                    raise ConfigError(t.path(key), "a boundary attached to a body takes no box")
+            lower = upper = None
+        else:
+            lower, upper = t.vector("lower"), t.vector("upper")
         vel = t.vector("velocity", (0.0, 0.0)) if kind == "velocity" else (0.0, 0.0)
         out.append(BoundaryConfig(name=t.string("name", f"boundary{k}"), type=kind,
-                                  lower=lower, upper=upper, velocity=vel))
+                                  lower=lower, upper=upper, velocity=vel, body=body, face=face))
         t.finish()
     return tuple(out)
 
@@ -281,7 +295,11 @@ def _solver(t):
         large_rotations=t.boolean("large_rotations", False),
         sort_interval=t.integer("sort_interval", 20, low=0),
         on_particle_exit=t.string("on_particle_exit", "error", choices=("error", "remove")),
-        max_steps=t.integer("max_steps", None, low=1))
+        max_steps=t.integer("max_steps", None, low=1),
+        interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS))
+    if s.interpolation not in ("point",) and s.shape_function not in GIMP_SHAPES:
+        raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "
+                                                   f"{' or '.join(map(repr, GIMP_SHAPES))}, not {s.shape_function!r}")
     t.finish()
     return s
 
@@ -386,6 +404,12 @@ def parse_scene(data, path="<scene>"):
                   output=_output(root.table("output", None), stem, solver.end_time, state_fields),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
     scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
+    names = [b.name for b in scene.bodies]
+    for k, bc in enumerate(scene.boundaries):
+        if bc.body is not None and bc.body not in names:
+            raise ConfigError(f"boundary[{k}].body", f"no body named {bc.body!r} (defined: {', '.join(names)})")
+    if scene.contact is not None and solver.interpolation != "point":
+        raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
     root.finish()
     return scene
 
