@@ -407,7 +407,11 @@ class Solver:
         p = self.particles
         kinetic = K.kinetic_energy(p["m"], p["v"])
         several = len(self.materials) > 1
-        strain = sum(K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
+        # hyperelastic models know their stored energy W(F); the others' is the recoverable
+        # 1/2 sigma : C^-1 : sigma
+        strain = sum(m.strain_energy(p["F"], p["vol0"], p["mat"], k if several else -1)
+                     if m.needs_deformation_gradient else
+                     K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
                      for k, m in enumerate(self.materials))
         plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
         ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(
