@@ -9,7 +9,7 @@ import logging
 
 import numpy as np
 
-__all__ = ["Particles", "CORE_FIELDS", "OPTIONAL_FIELDS"]
+__all__ = ["Particles", "CORE_FIELDS", "OPTIONAL_FIELDS", "DEFORMATION_FIELDS", "start_deformation"]
 logger = logging.getLogger(__name__)
 
 #: fields every particle has: name -> (trailing shape, dtype)
@@ -26,10 +26,32 @@ CORE_FIELDS = {
 }
 
 
-#: fields kept only when the scene asks for them in [output] fields (they cost memory and traffic)
+#: fields kept only when the scene asks for them (they cost memory and traffic): ``strain`` by
+#: [output] fields, the deformation gradient ``F`` (with ``vol0``) also when a material, the
+#: objective rate or the interpolation needs it (pmpm.core.solver.needs_deformation_gradient)
 OPTIONAL_FIELDS = {
     "strain": ((3,), np.float64),  # exx, eyy, gxy (engineering shear), accumulated increments
+    "F": ((5,), np.float64),       # deformation gradient Fxx, Fxy, Fyx, Fyy, Fzz (identity at start)
+    "vol0": ((), np.float64),      # initial volume: vol = vol0 det F where F is kept
 }
+
+#: the fields kept together when the deformation gradient is
+DEFORMATION_FIELDS = ("F", "vol0")
+
+
+def start_deformation(particles):
+    """Give ``particles`` the deformation gradient of the undeformed state (F = I, vol0 = vol).
+
+    Parameters
+    ----------
+    particles : Particles
+    """
+    particles.add_field("F", OPTIONAL_FIELDS["F"][0])
+    particles.add_field("vol0", ())
+    F = particles["F"]
+    F[...] = 0.0
+    F[:, 0] = F[:, 3] = F[:, 4] = 1.0
+    particles["vol0"][...] = particles["vol"]
 
 
 class Particles:

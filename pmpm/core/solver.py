@@ -25,12 +25,12 @@ from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
-from pmpm.core.particles import OPTIONAL_FIELDS
+from pmpm.core.particles import DEFORMATION_FIELDS, OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
 from pmpm.errors import ConfigError
 
-__all__ = ["Solver"]
+__all__ = ["Solver", "needs_deformation_gradient"]
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -38,6 +38,22 @@ ENERGY_CHECK_INTERVAL = 10
 #: energy above (initial + external work) that counts as divergence, relative to the energies
 #: in play: healthy runs stay within a few percent (tests show < 5%), diverging ones explode
 ENERGY_GROWTH_LIMIT = 0.5
+
+
+def needs_deformation_gradient(scene, materials):
+    """Whether the run keeps the deformation gradient F per particle: a material that needs it
+    (hyperelastic), the Green-Naghdi rate (the rotation of F), or an output field ``F``.
+    Otherwise F is neither stored nor updated (the kernels get None and compile it out).
+
+    Parameters
+    ----------
+    scene : pmpm.scene.config.Scene
+    materials : list of pmpm.physics.materials.Material
+    """
+    cfg = scene.solver
+    return (any(m.needs_deformation_gradient for m in materials)
+            or (cfg.large_rotations and cfg.objective_rate == "green_naghdi")
+            or "F" in scene.output.fields)
 
 
 def _scene_dir(scene):
@@ -83,7 +99,10 @@ class Solver:
                                          ghost_width(cfg.shape_function, cfg.interpolation), points["x"])
         optional = [f for f in scene.output.fields
                     if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
+        self.keeps_F = needs_deformation_gradient(scene, self.materials)
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
+        if self.keeps_F:
+            start_deformation(self.particles)
         if self.interpolation != "point":
             self._add_domains()
         del points
@@ -218,14 +237,28 @@ class Solver:
                                    *self._geometry(), remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
 
-    def update_strain(self, dt, velocity_field, move=True):
-        """Step 10 / eq. 6: strain increment, volume update, and (``move``) positions."""
-        p = self.particles
+    def _kinematics_outputs(self):
+        """Arrays the kinematics kernels fill or advance this step, None where the scene does
+        not ask for them: (de, dw, F, vol0, dtheta). ``dw`` is the spin increment (Jaumann),
+        ``dtheta`` the change of the polar angle of F (Green-Naghdi)."""
+        p, cfg = self.particles, self.scene.solver
         de = self._scratch("_de", (p.n, 3))
-        dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
-        self._de, self._dw = de, dw
+        dw = dtheta = None
+        if cfg.large_rotations:
+            if cfg.objective_rate == "green_naghdi":
+                dtheta = self._scratch("_dtheta_buf", (p.n,))
+            else:
+                dw = self._scratch("_dw_buf", (p.n,))
+        self._de, self._dw, self._dtheta = de, dw, dtheta
+        return de, dw, p.fields.get("F"), p.fields.get("vol0"), dtheta
+
+    def update_strain(self, dt, velocity_field, move=True):
+        """Step 10 / eq. 6: strain increment, volume (and F) update, and (``move``) positions."""
+        p = self.particles
+        de, dw, F, vol0, dtheta = self._kinematics_outputs()
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, velocity_field, self._dx if move else None, dt,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dtheta,
+            velocity_field, self._dx if move else None, dt,
             self.loads.gravity, None, None, None, *self._geometry())
         if self.interpolation == "cpgimp":
             self._stretch_domains(de)
@@ -243,7 +276,7 @@ class Solver:
         """Position update x += dt sum N v_i (USF: after the stress update)."""
         p = self.particles
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], None, None, None, 1, self._dx, dt,
+            p["x"], p["m"], p["vol"], None, None, None, None, None, None, 1, self._dx, dt,
             self.loads.gravity, None, None, None, *self._geometry())
         self._point_load_work()
 
@@ -257,19 +290,26 @@ class Solver:
     def update_stress(self):
         """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
         p = self.particles
-        if self._dw is not None:
-            K.jaumann_rotate(p["stress"], self._dw)
+        self._rotate(p["stress"])
         # internal work by the trapezoid rule, half before and half after the update; it closes
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         several = len(self.materials) > 1
         for k, material in enumerate(self.materials):
             state = {name: p.fields.get(name) for name in material.state_fields}
-            if self._dw is not None:
-                for name in material.tensor_state_fields:
-                    K.jaumann_rotate(p[name], self._dw)
+            if material.needs_deformation_gradient:
+                state["F"] = p["F"]
+            for name in material.tensor_state_fields:
+                self._rotate(p[name])
             material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+
+    def _rotate(self, t):
+        """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
+        if self._dw is not None:
+            K.jaumann_rotate(t, self._dw)
+        elif self._dtheta is not None:
+            K.rotate_by_angle(t, self._dtheta)
 
     # -- after the phases ---------------------------------------------------------------------
     def _check_and_next_dt(self):
@@ -281,9 +321,28 @@ class Solver:
             self.axis, c0, min(c1, g.cells[self.axis]))
         vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
         bad = self._bad_local + inverted + (0 if math.isfinite(vmax) else 1)
-        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving], dtype=np.float64))
+        bad_F, self._first_bad_F = K.check_deformation(self.particles["F"]) if self.keeps_F else (0, -1)
+        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving, bad_F], dtype=np.float64))
         self.vmax = flags[0]
+        if flags[4]:
+            raise UnstableRunError(self._bad_F_report())
         return int(flags[1]), int(flags[2]), int(flags[3])
+
+    def _bad_F_report(self):
+        """The message of a deformation gradient that turned singular, inverted or non-finite:
+        the first such particle of every rank, gathered (every rank raises the same text)."""
+        p, k = self.particles, self._first_bad_F
+        row = None
+        if k >= 0:
+            F = p["F"][k]
+            det = (F[0] * F[3] - F[1] * F[2]) * F[4]
+            row = (int(p["id"][k]), float(p["x"][k, 0]), float(p["x"][k, 1]), float(det))
+        rows = [r for r in self.comm.allgather(row) if r is not None]
+        i, x, y, det = min(rows)
+        return (f"the deformation gradient of particle id {i} at ({x:.4g}, {y:.4g}) is inverted or "
+                f"not finite (det F = {det:.4g}) at t = {self.t + self._dt_step:.6g} s "
+                f"(step {self.step_count + 1}, dt = {self._dt_step:.3g} s; the stable step is about "
+                f"{self.critical_dt():.3g} s)")
 
     def migrate(self, leaving):
         """Step 11: particles that left the slab move to the neighbour with all their state."""
@@ -389,7 +448,11 @@ class Solver:
         p = self.particles
         kinetic = K.kinetic_energy(p["m"], p["v"])
         several = len(self.materials) > 1
-        strain = sum(K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
+        # hyperelastic models know their stored energy W(F); the others' is the recoverable
+        # 1/2 sigma : C^-1 : sigma
+        strain = sum(m.strain_energy(p["F"], p["vol0"], p["mat"], k if several else -1)
+                     if m.needs_deformation_gradient else
+                     K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
                      for k, m in enumerate(self.materials))
         plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
         ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(

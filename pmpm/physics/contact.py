@@ -165,12 +165,10 @@ class ContactSolver(Solver):
 
     def update_strain(self, dt, velocity_field, move=True):
         p = self.particles
-        de = self._scratch("_de", (p.n, 3))
-        dw = self._scratch("_dw", (p.n,)) if self.scene.solver.large_rotations else None
-        self._de, self._dw = de, dw
+        de, dw, F, vol0, dtheta = self._kinematics_outputs()
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += KC.g2p_kinematics_bodies(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, p["body"], self.slot_of,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dtheta, p["body"], self.slot_of,
             _field(velocity_field), self._dx if move else None, dt,
             gravity, load_id, load_w, load_vec, *self._body_geometry())
 
@@ -178,5 +176,5 @@ class ContactSolver(Solver):
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += KC.g2p_kinematics_bodies(
-            p["x"], p["m"], p["vol"], None, None, None, p["body"], self.slot_of,
+            p["x"], p["m"], p["vol"], None, None, None, None, None, None, p["body"], self.slot_of,
             KC.MOM, self._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())

@@ -27,7 +27,7 @@ BODY_SHAPES = ("rectangle", "polygon", "circle", "i_section", "mesh")
 BC_TYPES = ("fixed", "roller_x", "roller_y", "velocity")
 BOUNDARY_FACES = ("left", "right", "bottom", "top")
 FORMULATIONS = ("plane_stress", "plane_strain")
-PARTICLE_FIELDS = ("x", "x0", "v", "m", "vol", "stress", "strain", "mat", "body")
+PARTICLE_FIELDS = ("x", "x0", "v", "m", "vol", "stress", "strain", "F", "mat", "body")
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,7 @@ class SolverConfig:
     sort_interval: int
     on_particle_exit: str
     max_steps: Optional[int]
+    objective_rate: str = "jaumann"   # of the hypoelastic models when large_rotations is on
     interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp" (pmpm.core.shape)
 
 
@@ -283,7 +284,18 @@ def _loads(root):
     return LoadsConfig(gravity=gravity, forces=tuple(forces), ground_motion=ground_motion, damping=damping)
 
 
+#: objective stress rates of the hypoelastic models (pmpm.core.kernels.objective)
+OBJECTIVE_RATES = ("jaumann", "green_naghdi")
+
+
 def _solver(t):
+    # naming a rate switches large rotations on; saying both "off" and a rate is a contradiction
+    rate_given, rotations_given = t.has("objective_rate"), t.has("large_rotations")
+    rate = t.string("objective_rate", "jaumann", choices=OBJECTIVE_RATES)
+    large_rotations = t.boolean("large_rotations", rate_given)
+    if rate_given and rotations_given and not large_rotations:
+        raise ConfigError(t.path("objective_rate"), "needs large_rotations = true (or leave "
+                                                    "large_rotations out: a rate switches it on)")
     s = SolverConfig(
         shape_function=t.string("shape_function", "cubic", choices=SHAPE_NAMES),
         scheme=t.string("scheme", "musl", choices=SCHEME_NAMES),
@@ -292,10 +304,11 @@ def _solver(t):
         end_time=t.number("end_time", low=0.0, low_open=True),
         time_step=t.number("time_step", None, low=0.0, low_open=True),
         mass_cutoff=t.number("mass_cutoff", 1e-8, low=0.0, high=1.0),
-        large_rotations=t.boolean("large_rotations", False),
+        large_rotations=large_rotations,
         sort_interval=t.integer("sort_interval", 20, low=0),
         on_particle_exit=t.string("on_particle_exit", "error", choices=("error", "remove")),
         max_steps=t.integer("max_steps", None, low=1),
+        objective_rate=rate,
         interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS))
     if s.interpolation not in ("point",) and s.shape_function not in GIMP_SHAPES:
         raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "

@@ -6,7 +6,8 @@ node", independently of the numba code paths.
 """
 import numpy as np
 
-__all__ = ["bspline_1d", "gimp_1d", "basis_matrix", "p2g_reference", "g2p_velocity_reference"]
+__all__ = ["bspline_1d", "gimp_1d", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
+           "g2p_kinematics_reference"]
 
 
 def _standard(order, xi):
@@ -99,3 +100,30 @@ def g2p_velocity_reference(order, x, v, vel, dvel, pic, origin, h, cells, domain
     N, _ = basis_matrix(order, x, origin, h, cells, domain)
     flip = v + np.einsum("pij,ijd->pd", N, dvel)
     return (1 - pic) * flip + pic * np.einsum("pij,ijd->pd", N, vel)
+
+
+def g2p_kinematics_reference(order, x, vel, F, vol0, dt, origin, h, cells):
+    """The kinematics of the step from nodal velocities ``vel`` (nx, ny, 2), written from the
+    equations as matrices: L = sum_i v_i (x) grad N_i, de = sym(L) dt (Voigt, engineering
+    shear), spin dw = skew(L)_yx dt, F <- (I + dt L) F (the 2x2 block of ``F`` (P, 5); Fzz
+    unchanged), vol = vol0 det F, and the change of the polar angle of F, dtheta, from the
+    rotation R of F = R U found by an eigen-decomposition of U^2 = F^T F (independent of the
+    kernel's closed form). Returns de (P, 3), dw (P,), F (P, 5), vol (P,), dtheta (P,)."""
+    _, dN = basis_matrix(order, x, origin, h, cells)
+    L = np.einsum("ijd,pije->pde", vel, dN)          # L[p, d, e] = d v_d / d x_e
+    de = np.stack([L[:, 0, 0], L[:, 1, 1], L[:, 0, 1] + L[:, 1, 0]], axis=1) * dt
+    dw = 0.5 * (L[:, 1, 0] - L[:, 0, 1]) * dt
+    F2 = F[:, :4].reshape(-1, 2, 2)
+    new2 = np.einsum("pde,pef->pdf", np.eye(2) + dt * L, F2)
+    Fn = F.copy()
+    Fn[:, :4] = new2.reshape(-1, 4)
+    vol = vol0 * np.linalg.det(new2)
+
+    def rotation_angle(A):
+        lam, Q = np.linalg.eigh(np.einsum("pdi,pdj->pij", A, A))
+        U_inv = np.einsum("pij,pj,pkj->pik", Q, 1.0 / np.sqrt(lam), Q)
+        R = np.einsum("pij,pjk->pik", A, U_inv)
+        return np.arctan2(R[:, 1, 0], R[:, 0, 0])
+
+    dtheta = np.angle(np.exp(1j * (rotation_angle(new2) - rotation_angle(F2))))
+    return de, dw, Fn, vol, dtheta

@@ -9,6 +9,8 @@ pmpm/core/shape.py), then each particle of the block does its scatter or gather 
 weight of node (I0[q] + a, J0[q] + b) is WX[a, q] * WY[b, q], its gradient in cell units
 (WX[K + a, q] * WY[b, q], WX[a, q] * WY[K + b, q]).
 """
+import math
+
 import numba as nb
 import numpy as np
 
@@ -34,9 +36,23 @@ def _external_force(p, m, gravity, load_id, load_w, load_vec):
 
 
 @nb.njit(cache=True, inline="always")
-def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol):
+def polar_angle(fxx, fxy, fyx, fyy):
+    """Angle of the rotation R of the polar decomposition F = R U of a 2x2 F with det F > 0:
+    F11 + F22 = cos(theta) tr U and F21 - F12 = sin(theta) tr U, tr U > 0."""
+    return math.atan2(fyx - fxy, fxx + fyy)
+
+
+@nb.njit(cache=True, inline="always")
+def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dtheta):
     """Particle p's strain increment c L (c = dt / h, L the velocity gradient sums in cell
-    units) into ``de``, its spin into ``dw`` (not None), ``strain`` (not None) and volume."""
+    units) into ``de``, its spin into ``dw`` (not None), ``strain`` (not None) and volume.
+
+    With ``F`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz) not None the deformation gradient is advanced
+    by the same velocity gradient, F <- (I + dt L) F (Fzz is the material's: plane stress
+    thickness stretch), and the volume is ``vol0`` det F (in-plane det: the volume is the area
+    times the initial thickness, see docs/large_deformation.md); ``dtheta`` (not None) receives
+    the increment of the polar rotation angle of F over the step (Green-Naghdi rate).
+    Without F the volume follows the trace of the increment, vol *= 1 + tr(de)."""
     dexx = c * lxx
     deyy = c * lyy
     dgxy = c * (lxy + lyx)
@@ -49,7 +65,29 @@ def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol):
         strain[p, 0] += dexx
         strain[p, 1] += deyy
         strain[p, 2] += dgxy
-    vol[p] *= 1.0 + dexx + deyy
+    if F is not None:
+        fxx = F[p, 0]
+        fxy = F[p, 1]
+        fyx = F[p, 2]
+        fyy = F[p, 3]
+        nxx = fxx + dexx * fxx + c * lxy * fyx
+        nxy = fxy + dexx * fxy + c * lxy * fyy
+        nyx = fyx + c * lyx * fxx + deyy * fyx
+        nyy = fyy + c * lyx * fxy + deyy * fyy
+        F[p, 0] = nxx
+        F[p, 1] = nxy
+        F[p, 2] = nyx
+        F[p, 3] = nyy
+        vol[p] = vol0[p] * (nxx * nyy - nxy * nyx)
+        if dtheta is not None:
+            d = polar_angle(nxx, nxy, nyx, nyy) - polar_angle(fxx, fxy, fyx, fyy)
+            if d > math.pi:
+                d -= 2.0 * math.pi
+            elif d < -math.pi:
+                d += 2.0 * math.pi
+            dtheta[p] = d
+    else:
+        vol[p] *= 1.0 + dexx + deyy
 
 
 @nb.njit(cache=True, inline="always")
@@ -194,14 +232,15 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap,
 
 
 @nb.njit(cache=True)
-def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
+def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dtheta, vel_field, dx, dt,
                    gravity, load_id, load_w, load_vec,
                    G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Strain increment from the grid velocity in ``vel_field`` (paper eq. 6), volume update,
     and (``dx`` not None) the position update x += dx computed by g2p_velocity (eq. 5).
 
     ``de`` (N, 3) receives the strain increment when not None (``vol`` and, when kept,
-    ``strain`` are updated with it); ``dw`` (N,) the spin increment when not None (objective stress rate).
+    ``strain`` are updated with it); ``dw`` (N,) the spin increment when not None (Jaumann
+    rate); ``F``, ``vol0``, ``dtheta``: the deformation gradient, see :func:`strain_increment`.
     Returns the work of the external forces over the moves."""
     work = 0.0
     K = stencil(shape)
@@ -232,7 +271,7 @@ def g2p_kinematics(x, m, vol, strain, de, dw, vel_field, dx, dt,
                         lxy += gvx * dny
                         lyx += gvy * dnx
                         lyy += gvy * dny
-                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol)
+                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dtheta)
             if dx is not None:
                 work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work

@@ -6,6 +6,7 @@ from pmpm.registry import lookup, names
 from pmpm.physics.materials.base import Material
 from pmpm.physics.materials import linear_elastic  # noqa: F401  (registers)
 from pmpm.physics.materials import smooth_vonmises, bilinear_vonmises  # noqa: F401
+from pmpm.physics.materials import neo_hookean  # noqa: F401
 
 __all__ = ["Material", "make_material", "material_names"]
 

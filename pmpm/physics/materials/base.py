@@ -79,6 +79,9 @@ class Material:
     diagnostic_fields = ()
     #: formulations the model supports
     formulations = FORMULATIONS
+    #: whether the model reads the deformation gradient (hyperelastic): the run then keeps F
+    #: and the solver passes it as ``state["F"]`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz)
+    needs_deformation_gradient = False
 
     def __init__(self, table, key, formulation):
         if formulation not in self.formulations:

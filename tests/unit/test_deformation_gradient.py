@@ -1,0 +1,123 @@
+"""The deformation gradient F per particle: the kinematics kernel against its NumPy twin, F
+kept only when the scene needs it, and a run that inverts F stops with the particle named."""
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pmpm.core import kernels as K
+from pmpm.core.kernels.reference import g2p_kinematics_reference
+from pmpm.core.shape import SHAPE_TAGS, SHAPES
+from pmpm.core.solver import Solver
+from pmpm.errors import ConfigError, UnstableRunError
+from pmpm.scene.config import parse_scene
+
+ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
+CELLS = (9, 6)
+H = 0.25
+ORIGIN = np.array([-1.0, 0.5])
+
+
+def _state(n=200, seed=3):
+    rng = np.random.default_rng(seed)
+    x = ORIGIN + rng.uniform(0, 1, (n, 2)) * np.array(CELLS) * H
+    x[:5, 0] = ORIGIN[0] + 1e-9  # on an edge: the boundary-modified splines
+    F = np.zeros((n, 5))
+    F[:, :4] = np.array([1.0, 0.0, 0.0, 1.0]) + 0.3 * rng.normal(size=(n, 4))
+    F[:, 4] = rng.uniform(0.8, 1.2, n)
+    F[:, :4] *= np.sign(F[:, 0] * F[:, 3] - F[:, 1] * F[:, 2])[:, None] ** np.array([1, 1, 0, 0])  # det > 0
+    vel = rng.normal(size=(CELLS[0] + 1, CELLS[1] + 1, 2))
+    return x, F, rng.uniform(0.1, 0.3, n), vel
+
+
+@pytest.mark.parametrize("name", list(SHAPES))
+def test_kinematics_kernel_matches_reference(name):
+    """de, dw, F <- (I + dt L) F, vol = vol0 det F and the polar-angle change agree with the
+    matrix twin to round-off (1e-12 relative: the same sums in another order)."""
+    x, F, vol0, vel = _state()
+    dt = 0.01
+    assert np.all(F[:, 0] * F[:, 3] - F[:, 1] * F[:, 2] > 0)
+    G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
+    G[..., K.REMAP:K.REMAP + 2] = vel
+    n = len(x)
+    de, dw, dtheta = np.empty((n, 3)), np.empty(n), np.empty(n)
+    vol, Fk = vol0.copy(), F.copy()
+    K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dtheta, K.REMAP, None, dt,
+                     None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
+    r_de, r_dw, r_F, r_vol, r_dtheta = g2p_kinematics_reference(ORDER[name], x, vel, F, vol0, dt,
+                                                                ORIGIN, H, CELLS)
+    np.testing.assert_allclose(de, r_de, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(dw, r_dw, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Fk, r_F, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(vol, r_vol, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(dtheta, r_dtheta, rtol=1e-9, atol=1e-11)  # eigh of F^T F: ~1e-13
+    assert np.abs(dtheta).max() > 1e-3  # the angles moved: the comparison means something
+
+
+def _spin_scene(**solver):
+    return parse_scene({
+        "particles_per_cell": 2,
+        "grid": {"origin": [-2.0, -2.0], "cell_size": 0.2, "cells": [20, 20]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e6, "nu": 0.3, "density": 1000.0}},
+        "bodies": [{"shape": "rectangle", "material": "m", "lower": [-1.2, -1.2], "upper": [1.2, 1.2],
+                    "velocity": ["-0.5 * y", "0.5 * x"]}],
+        "solver": {"end_time": 1.0, "cfl": 0.5, **solver},
+        "output": {"fields": ["x", "v", "stress"]},
+    }, "spin.toml")
+
+
+def test_F_is_kept_only_when_the_scene_needs_it():
+    """No material, rate or output needs F: it is not stored (off costs nothing); an output
+    field F, or the Green-Naghdi rate, keeps it, starting from the identity with vol0 = vol."""
+    plain = Solver(_spin_scene(large_rotations=True), MPI.COMM_SELF)
+    assert "F" not in plain.particles and "vol0" not in plain.particles and not plain.keeps_F
+    gn = Solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
+    assert gn.keeps_F
+    F = gn.particles["F"]
+    np.testing.assert_array_equal(F, np.tile([1.0, 0.0, 0.0, 1.0, 1.0], (len(F), 1)))
+    np.testing.assert_array_equal(gn.particles["vol0"], gn.particles["vol"])
+
+
+def test_rigid_rotation_turns_F_into_the_rotation():
+    """A square spinning at w = 0.5 rad/s, one step: deep inside (support away from the free
+    edges, where B-splines reproduce the linear velocity field exactly; later steps are no
+    longer a rigid rotation, the spinning square stretches) F = I + dt W, det F = 1 + (w dt)^2,
+    the polar angle atan(w dt), to round-off; the solver's Green-Naghdi increment is that angle."""
+    s = Solver(_spin_scene(objective_rate="green_naghdi", time_step=0.01), MPI.COMM_SELF)
+    s.step()  # (it sorts the particles: the mask is taken after it)
+    deep = np.abs(s.particles["x"]).max(axis=1) < 1.2 - 3 * 0.2
+    assert deep.sum() > 10
+    F = s.particles["F"][deep]
+    wdt = 0.5 * 0.01
+    np.testing.assert_allclose(F, np.tile([1.0, -wdt, wdt, 1.0, 1.0], (len(F), 1)), rtol=0, atol=1e-13)
+    vol = s.particles["vol"][deep] / s.particles["vol0"][deep]
+    np.testing.assert_allclose(vol, 1 + wdt ** 2, rtol=1e-13)
+    np.testing.assert_allclose(s._dtheta[deep], math.atan(wdt), rtol=1e-11)
+
+
+def test_inverted_F_stops_the_run_naming_the_particle():
+    """det F <= 0 is a fault: the step raises UnstableRunError with the particle id, its
+    position and the time (run.py then saves the last good state, as for any instability)."""
+    s = Solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
+    s.step()
+    k = 7
+    s.particles["F"][k, :4] = [1.0, 0.0, 0.0, -1.0]  # a reflection: det F = -1
+    with pytest.raises(UnstableRunError) as err:
+        s.step()
+    msg = str(err.value)
+    assert f"particle id {s.particles['id'][k]} at (" in msg and "det F = " in msg and "t = " in msg
+    s.particles["F"][k, :4] = [np.nan, 0.0, 0.0, 1.0]  # not finite
+    with pytest.raises(UnstableRunError, match="not finite"):
+        s.step()
+
+
+def test_objective_rate_config():
+    assert _spin_scene().solver.large_rotations is False
+    gn = _spin_scene(objective_rate="green_naghdi").solver
+    assert (gn.large_rotations, gn.objective_rate) == (True, "green_naghdi")  # the rate switches it on
+    assert _spin_scene(large_rotations=True).solver.objective_rate == "jaumann"  # today's default
+    with pytest.raises(ConfigError, match="solver.objective_rate"):
+        _spin_scene(objective_rate="truesdell")
+    with pytest.raises(ConfigError, match="solver.objective_rate"):
+        _spin_scene(objective_rate="jaumann", large_rotations=False)
