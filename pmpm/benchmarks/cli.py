@@ -15,6 +15,8 @@ def add_bench_parser(sub):
     t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
     t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    t.add_argument("--interpolation", default="point", choices=["point", "ugimp", "cpgimp"],
+                   help="point B-splines or the B-spline GIMP (cubic only)")
     t.add_argument("--phases", action="store_true",
                    help="also time every kernel call of the step (after the timed repeats)")
     e = bs.add_parser("effects", help="cost of each optional effect alone")

@@ -97,7 +97,9 @@ def throughput(args):
     from mpi4py import MPI
     from pmpm.core.solver import Solver
     t0 = time.perf_counter()
-    warm = Solver(block_scene(1000, args.shape, args.scheme, args.material), MPI.COMM_SELF)
+    interp = getattr(args, "interpolation", "point")
+    extra = None if interp == "point" else {"interpolation": interp}
+    warm = Solver(block_scene(1000, args.shape, args.scheme, args.material, extra_solver=extra), MPI.COMM_SELF)
     for _ in range(3):
         warm.step()
     del warm
@@ -108,7 +110,8 @@ def throughput(args):
     results = []
     for n in args.particles:
         base = _memory_baseline()
-        solver = Solver(block_scene(n, args.shape, args.scheme, args.material), MPI.COMM_SELF)
+        solver = Solver(block_scene(n, args.shape, args.scheme, args.material, extra_solver=extra),
+                        MPI.COMM_SELF)
         for _ in range(YIELD_AFTER_STEPS):  # first-touch of the arrays; a plastic block yields
             solver.step()
         times = [_time_steps(solver, args.steps) for _ in range(args.repeat)]
@@ -118,7 +121,7 @@ def throughput(args):
         rate = n_real * args.steps / med
         mem = (_peak_rss_bytes() - base) / n_real
         res = {"particles": n_real, "steps": args.steps, "repeats": args.repeat, "shape": args.shape,
-               "scheme": args.scheme, "material": args.material, "median_s": med,
+               "scheme": args.scheme, "material": args.material, "interpolation": interp, "median_s": med,
                "particle_steps_per_s": rate, "ns_per_particle_step": 1e9 / rate,
                "cpu_particle_steps_per_s": n_real * args.steps / cpu,
                "bytes_per_particle": mem, "bytes_moved_per_particle_step": step_bytes_per_particle(solver)}
