@@ -326,23 +326,66 @@ def _cubic_block(s, nq, n, start, W):
             _put(W, q, start, i0, w, g)
 
 
+@nb.njit(cache=True, inline="always")
+def _integrals(t):
+    """Phi(t + 1 - k), k = 0..3: the antiderivative of the cubic B-spline at the offsets of
+    nodes c-1 .. c+2 from a point c + t of cell c (Phi is 1 to the left of these, 0 to the
+    right), with Q(t) = 2t/3 - t^3/3 + t^4/8 the integral of the inner piece from 0 to t."""
+    e = 1.0 - t
+    t2 = t * t
+    e2 = e * e
+    qt = t * (2.0 / 3.0) - t2 * t * (1.0 / 3.0) + t2 * t2 * 0.125
+    qe = e * (2.0 / 3.0) - e2 * e * (1.0 / 3.0) + e2 * e2 * 0.125
+    return 1.0 - e2 * e2 * (1.0 / 24.0), 0.5 + qt, 0.5 - qe, t2 * t2 * (1.0 / 24.0)
+
+
 @nb.njit(cache=True)
 def _cubic_gimp_block(s, L, nq, n, start, W):
     """The interior GIMP weights in closed form (the domain inside the grid, the support away
-    from the ghost nodes: no clamping, 1 / (b - a) = 1 / (2 l)); the rest by ``cubic_gimp``."""
+    from the ghost nodes: no clamping, 1 / (b - a) = 1 / (2 l)); the rest by ``cubic_gimp``.
+
+    With a = s - l in cell ca and b = s + l in cell cb = ca or ca + 1 (2 l <= 1), the weight of
+    node ca - 1 + k is (Phi(b - i) - Phi(a - i)) / (2 l) and its derivative
+    (N(b - i) - N(a - i)) / (2 l); Phi and N at the four nodes around each end come from the
+    end's offset in its cell (``_integrals`` and the cubic B-spline weights), shifted by one node
+    for b when cb = ca + 1. Branch-free, so the loop vectorises."""
     for q in range(nq):
         l = L[q]
+        inv = 0.5 / l
         a = s[q] - l
         b = s[q] + l
-        c = math.floor(a)
-        inv = 0.5 / l
-        for k in range(5):
-            i = c - 1.0 + k
-            na, pa = _spline_and_integral(a - i)
-            nb_, pb = _spline_and_integral(b - i)
-            W[k, q] = (pb - pa) * inv
-            W[5 + k, q] = (nb_ - na) * inv
-        start[q] = np.int64(c) - 1
+        ca = math.floor(a)
+        cb = math.floor(b)
+        fa = a - ca
+        fb = b - cb
+        up = cb - ca          # 0 or 1
+        keep = 1.0 - up
+        A0, A1, A2, A3 = _integrals(fa)
+        B0, B1, B2, B3 = _integrals(fb)
+        ea = 1.0 - fa
+        eb = 1.0 - fb
+        fa2 = fa * fa
+        fb2 = fb * fb
+        na0 = ea * ea * ea * (1.0 / 6.0)
+        na1 = 0.5 * fa2 * fa - fa2 + 2.0 / 3.0
+        na2 = (-3.0 * fa2 * fa + 3.0 * fa2 + 3.0 * fa + 1.0) * (1.0 / 6.0)
+        na3 = fa2 * fa * (1.0 / 6.0)
+        nb0 = eb * eb * eb * (1.0 / 6.0)
+        nb1 = 0.5 * fb2 * fb - fb2 + 2.0 / 3.0
+        nb2 = (-3.0 * fb2 * fb + 3.0 * fb2 + 3.0 * fb + 1.0) * (1.0 / 6.0)
+        nb3 = fb2 * fb * (1.0 / 6.0)
+        # b's values on the 5 nodes ca-1 .. ca+3: (B0..B3, 0) or, one cell up, (1, B0..B3)
+        W[0, q] = (keep * B0 + up - A0) * inv
+        W[1, q] = (keep * B1 + up * B0 - A1) * inv
+        W[2, q] = (keep * B2 + up * B1 - A2) * inv
+        W[3, q] = (keep * B3 + up * B2 - A3) * inv
+        W[4, q] = (up * B3) * inv
+        W[5, q] = (keep * nb0 - na0) * inv
+        W[6, q] = (keep * nb1 + up * nb0 - na1) * inv
+        W[7, q] = (keep * nb2 + up * nb1 - na2) * inv
+        W[8, q] = (keep * nb3 + up * nb2 - na3) * inv
+        W[9, q] = (up * nb3) * inv
+        start[q] = np.int64(ca) - 1
     for q in range(nq):
         if start[q] < 0 or start[q] + 4 > n or not abs(s[q]) < _HUGE:
             i0, w, g = cubic_gimp(s[q], L[q], n)
