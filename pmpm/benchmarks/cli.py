@@ -15,6 +15,8 @@ def add_bench_parser(sub):
     t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
     t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    t.add_argument("--track-F", dest="track_F", action="store_true",
+                   help="keep the deformation gradient F although the material does not need it")
     t.add_argument("--phases", action="store_true",
                    help="also time every kernel call of the step (after the timed repeats)")
     e = bs.add_parser("effects", help="cost of each optional effect alone")
