@@ -50,7 +50,7 @@ def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dth
     With ``F`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz) not None the deformation gradient is advanced
     by the same velocity gradient, F <- (I + dt L) F (Fzz is the material's: plane stress
     thickness stretch), and the volume is ``vol0`` det F (in-plane det: the volume is the area
-    times the initial thickness, see docs/large_deformation.md); ``dtheta`` (not None) receives
+    times the initial thickness, see docs/deformation_gradient.md); ``dtheta`` (not None) receives
     the increment of the polar rotation angle of F over the step (Green-Naghdi rate).
     Without F the volume follows the trace of the increment, vol *= 1 + tr(de)."""
     dexx = c * lxx
