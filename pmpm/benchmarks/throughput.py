@@ -161,6 +161,7 @@ def _effect_scenes(n, record):
         "large rotations (Green-Naghdi)": block_scene(n, extra_solver={"objective_rate": "green_naghdi"}),
         "deformation gradient kept": block_scene(n, track_F=True),
         "plasticity (smooth_vonmises)": block_scene(n, material="smooth_vonmises"),
+        "hyperelasticity (neo_hookean)": block_scene(n, material="neo_hookean"),
     }
 
 

@@ -42,7 +42,8 @@ def test_effects_prints_every_effect():
     assert code == 0
     assert set(summary["effects"]) == {"none", "gravity", "force (step)", "damping", "ground motion",
                                        "large rotations", "large rotations (Green-Naghdi)",
-                                       "deformation gradient kept", "plasticity (smooth_vonmises)"}
+                                       "deformation gradient kept", "plasticity (smooth_vonmises)",
+                                       "hyperelasticity (neo_hookean)"}
     assert summary["effects"]["none"]["overhead"] == 0.0
 
 

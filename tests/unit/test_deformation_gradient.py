@@ -121,3 +121,31 @@ def test_objective_rate_config():
         _spin_scene(objective_rate="truesdell")
     with pytest.raises(ConfigError, match="solver.objective_rate"):
         _spin_scene(objective_rate="jaumann", large_rotations=False)
+
+
+@pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
+def test_thickness_stretch_of_a_hypoelastic_material(formulation):
+    """Uniaxial strain L = diag(a, 0) of linear_elastic, driven through the solver's phases:
+    in plane stress szz = 0 gives d_ezz = -nu / (1 - nu) d_exx each step, so after n steps
+    F33 = (1 - nu/(1 - nu) a dt)^n (to round-off); in plane strain F33 stays 1."""
+    nu, a, dt, n = 0.3, 2.0, 1e-3, 50
+    scene = parse_scene({
+        "formulation": formulation,
+        "grid": {"origin": [0.0, 0.0], "cell_size": 0.25, "cells": [6, 6]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e9, "nu": nu, "density": 1000.0}},
+        "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.5, 0.5], "upper": [1.0, 1.0]}],
+        "solver": {"end_time": 1.0},
+        "output": {"fields": ["x", "F"]},
+    }, "stretch.toml")
+    s = Solver(scene, MPI.COMM_SELF)
+    w, g = s.window, s.grid
+    x = g.origin[0] + (w.ox + np.arange(w.shape[0])) * g.h
+    for _ in range(n):
+        w.G[...] = 0.0
+        w.G[:, :, K.REMAP] = a * x[:, None]  # v_x = a x
+        s.update_strain(dt, K.REMAP, move=False)
+        s.update_stress()
+    F = s.particles["F"]
+    np.testing.assert_allclose(F[:, 0], (1 + a * dt) ** n, rtol=1e-12)
+    expect = (1 - nu / (1 - nu) * a * dt) ** n if formulation == "plane_stress" else 1.0
+    np.testing.assert_allclose(F[:, 4], expect, rtol=1e-12)
