@@ -257,7 +257,8 @@ class Solver:
         thickness = self.keeps_F and self.scene.formulation == "plane_stress"
         for k, material in enumerate(self.materials):
             if thickness and not material.needs_deformation_gradient:
-                trace_before = p["stress"][:, 0] + p["stress"][:, 1]
+                trace_before = self._scratch("_trace_buf", (p.n,))
+                K.in_plane_trace(p["stress"], trace_before)
             state = {name: p.fields.get(name) for name in material.state_fields}
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
@@ -265,21 +266,10 @@ class Solver:
                 self._rotate(p[name])
             material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
             if thickness and not material.needs_deformation_gradient:
-                self._thickness_stretch(material, trace_before, k if several else -1)
+                # F33 from szz = 0 (the hyperelastic models solve it themselves)
+                K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
+                                            material.E, material.nu, p["mat"], k if several else -1)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
-
-    def _thickness_stretch(self, material, trace_before, which):
-        """Advance F33 of a hypoelastic material in plane stress from szz = 0: with isotropic
-        elasticity and plastic incompressibility (von Mises flow is deviatoric),
-        d_ezz = -(d_exx + d_eyy) + (1 - 2 nu) / E d(sxx + syy); for linear elasticity this is
-        -nu / (1 - nu) (d_exx + d_eyy). The rotation before the material update keeps the trace."""
-        p = self.particles
-        de = self._de
-        dezz = (-(de[:, 0] + de[:, 1])
-                + (1 - 2 * material.nu) / material.E * (p["stress"][:, 0] + p["stress"][:, 1] - trace_before))
-        if which >= 0:
-            dezz = np.where(p["mat"] == which, dezz, 0.0)
-        p["F"][:, 4] *= 1.0 + dezz
 
     def _rotate(self, t):
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""

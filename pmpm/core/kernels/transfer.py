@@ -80,12 +80,13 @@ def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dth
         F[p, 3] = nyy
         vol[p] = vol0[p] * (nxx * nyy - nxy * nyx)
         if dtheta is not None:
-            d = polar_angle(nxx, nxy, nyx, nyy) - polar_angle(fxx, fxy, fyx, fyy)
-            if d > math.pi:
-                d -= 2.0 * math.pi
-            elif d < -math.pi:
-                d += 2.0 * math.pi
-            dtheta[p] = d
+            # polar_angle(new) - polar_angle(old) in (-pi, pi] with one atan2: the angle between
+            # the vectors (F11 + F22, F21 - F12) of the two, which point along R (tr U > 0)
+            ox = fxx + fyy
+            oy = fyx - fxy
+            qx = nxx + nyy
+            qy = nyx - nxy
+            dtheta[p] = math.atan2(ox * qy - oy * qx, ox * qx + oy * qy)
     else:
         vol[p] *= 1.0 + dexx + deyy
 
