@@ -207,25 +207,25 @@ class Solver:
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
-        not ask for them: (de, dw, F, vol0, dtheta). ``dw`` is the spin increment (Jaumann),
-        ``dtheta`` the change of the polar angle of F (Green-Naghdi)."""
+        not ask for them: (de, dw, F, vol0, dq). ``dw`` is the spin increment (Jaumann),
+        ``dq`` the cosine and sine of the change of the polar angle of F (Green-Naghdi)."""
         p, cfg = self.particles, self.scene.solver
         de = self._scratch("_de", (p.n, 3))
-        dw = dtheta = None
+        dw = dq = None
         if cfg.large_rotations:
             if cfg.objective_rate == "green_naghdi":
-                dtheta = self._scratch("_dtheta_buf", (p.n,))
+                dq = self._scratch("_dq_buf", (p.n, 2))
             else:
                 dw = self._scratch("_dw_buf", (p.n,))
-        self._de, self._dw, self._dtheta = de, dw, dtheta
-        return de, dw, p.fields.get("F"), p.fields.get("vol0"), dtheta
+        self._de, self._dw, self._dq = de, dw, dq
+        return de, dw, p.fields.get("F"), p.fields.get("vol0"), dq
 
     def update_strain(self, dt, velocity_field, move=True):
         """Step 10 / eq. 6: strain increment, volume (and F) update, and (``move``) positions."""
         p = self.particles
-        de, dw, F, vol0, dtheta = self._kinematics_outputs()
+        de, dw, F, vol0, dq = self._kinematics_outputs()
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dtheta,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq,
             velocity_field, self._dx if move else None, dt,
             self.loads.gravity, None, None, None, *self._geometry())
         if move:
@@ -275,8 +275,8 @@ class Solver:
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
         if self._dw is not None:
             K.jaumann_rotate(t, self._dw)
-        elif self._dtheta is not None:
-            K.rotate_by_angle(t, self._dtheta)
+        elif self._dq is not None:
+            K.rotate(t, self._dq)
 
     # -- after the phases ---------------------------------------------------------------------
     def _check_and_next_dt(self):

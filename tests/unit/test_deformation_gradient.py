@@ -41,9 +41,9 @@ def test_kinematics_kernel_matches_reference(name):
     G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
     G[..., K.REMAP:K.REMAP + 2] = vel
     n = len(x)
-    de, dw, dtheta = np.empty((n, 3)), np.empty(n), np.empty(n)
+    de, dw, dq = np.empty((n, 3)), np.empty(n), np.empty((n, 2))
     vol, Fk = vol0.copy(), F.copy()
-    K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dtheta, K.REMAP, None, dt,
+    K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dq, K.REMAP, None, dt,
                      None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
     r_de, r_dw, r_F, r_vol, r_dtheta = g2p_kinematics_reference(ORDER[name], x, vel, F, vol0, dt,
                                                                 ORIGIN, H, CELLS)
@@ -51,7 +51,9 @@ def test_kinematics_kernel_matches_reference(name):
     np.testing.assert_allclose(dw, r_dw, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(Fk, r_F, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(vol, r_vol, rtol=1e-12, atol=1e-14)
+    dtheta = np.arctan2(dq[:, 1], dq[:, 0])
     np.testing.assert_allclose(dtheta, r_dtheta, rtol=1e-9, atol=1e-11)  # eigh of F^T F: ~1e-13
+    np.testing.assert_allclose(np.hypot(dq[:, 0], dq[:, 1]), 1.0, rtol=1e-14)  # a rotation
     assert np.abs(dtheta).max() > 1e-3  # the angles moved: the comparison means something
 
 
@@ -93,7 +95,7 @@ def test_rigid_rotation_turns_F_into_the_rotation():
     np.testing.assert_allclose(F, np.tile([1.0, -wdt, wdt, 1.0, 1.0], (len(F), 1)), rtol=0, atol=1e-13)
     vol = s.particles["vol"][deep] / s.particles["vol0"][deep]
     np.testing.assert_allclose(vol, 1 + wdt ** 2, rtol=1e-13)
-    np.testing.assert_allclose(s._dtheta[deep], math.atan(wdt), rtol=1e-11)
+    np.testing.assert_allclose(np.arctan2(s._dq[deep, 1], s._dq[deep, 0]), math.atan(wdt), rtol=1e-11)
 
 
 def test_inverted_F_stops_the_run_naming_the_particle():
