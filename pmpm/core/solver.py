@@ -25,7 +25,7 @@ from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
-from pmpm.core.particles import DEFORMATION_FIELDS, OPTIONAL_FIELDS, start_deformation
+from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import SHAPE_TAGS, ghost_width, min_cells
 from pmpm.errors import ConfigError
