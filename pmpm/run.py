@@ -182,7 +182,10 @@ class Run:
         out = self.solver.loads.describe()
         out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
         if self.scene.solver.large_rotations:
-            out.append("large rotations (Jaumann stress rate)")
+            rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[self.scene.solver.objective_rate]
+            out.append(f"large rotations ({rate} stress rate)")
+        if s.keeps_F:
+            out.append("deformation gradient F per particle")
         if s.damping is not None:
             out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
         if s.ground is not None:

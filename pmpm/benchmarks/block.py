@@ -14,6 +14,8 @@ MATERIALS = {
                         "yield_stress": 250e6, "hardening": 0.05, "smoothness": 10.0},
     "bilinear_vonmises": {"type": "bilinear_vonmises", "E": 200e9, "nu": 0.3, "density": 7850.0,
                           "yield_stress": 250e6, "hardening": 0.05},
+    # hyperelastic with the steel's small-strain constants: the same block, the same CFL step
+    "neo_hookean": {"type": "neo_hookean", "E": 200e9, "nu": 0.3, "density": 7850.0},
 }
 
 
@@ -24,7 +26,7 @@ YIELD_AFTER_STEPS = 30
 
 
 def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc=2, aspect=1.0,
-                gravity=None, force=False, extra_solver=None, extra_loads=None):
+                gravity=None, force=False, extra_solver=None, extra_loads=None, track_F=False):
     """A square (or ``aspect`` wide) elastic block filling a grid, loaded hard enough to yield.
 
     The block is clamped at its base and starts with a shear velocity field (2 m/s at the
@@ -32,7 +34,8 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
     stress that shear reaches after ``YIELD_AFTER_STEPS`` steps: steel's 250 MPa would need
     ~100 times more steps than a benchmark runs, and a plastic model far below yield costs
     what an elastic one does, so the figures are those of the yielding regime, the model's
-    most expensive one.
+    most expensive one. ``track_F`` keeps the deformation gradient although nothing needs it
+    (as an output field ``F`` does): its cost alone.
     """
     from pmpm.scene.config import parse_scene
     cells_total = particles / ppc ** 2
@@ -65,4 +68,6 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
         if force:
             data["loads"]["forces"] = [{"lower": [2 * h, (ny - 1) * h], "upper": [(nx + 2) * h, ny * h],
                                         "force": [1e3, 0.0]}]
+    if track_F:
+        data["output"] = {"fields": ["x", "v", "stress", "F"]}
     return parse_scene(data, "bench.toml")

@@ -17,6 +17,8 @@ def add_bench_parser(sub):
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
     t.add_argument("--interpolation", default="point", choices=["point", "ugimp", "cpgimp"],
                    help="point B-splines or the B-spline GIMP (cubic only)")
+    t.add_argument("--track-F", dest="track_F", action="store_true",
+                   help="keep the deformation gradient F although the material does not need it")
     t.add_argument("--phases", action="store_true",
                    help="also time every kernel call of the step (after the timed repeats)")
     e = bs.add_parser("effects", help="cost of each optional effect alone")

@@ -78,12 +78,14 @@ def step_bytes_per_particle(solver):
     (counted once per phase) plus the grid window's passes, per particle."""
     p = solver.particles
     size = {k: a.itemsize * (a.size // max(len(a), 1)) for k, a in p.fields.items()}
-    size.setdefault("strain", 0)  # kept only when the scene outputs it
+    for optional in ("strain", "F", "vol0"):  # kept only when the scene needs them
+        size.setdefault(optional, 0)
+    reads_F = ("F",) if any(m.needs_deformation_gradient for m in solver.materials) else ()
     passes = [  # (read, written) particle fields per phase of the MUSL step
         (("x", "m", "v", "vol", "stress"), ()),                               # particles_to_grid
         (("x", "m", "v"), ("v",)),                                            # grid_to_particles
-        (("x", "m", "vol", "strain"), ("x", "vol", "strain")),                # update_strain
-        (("stress", "vol"), ("stress",)),                                     # update_stress
+        (("x", "m", "vol", "strain", "F", "vol0"), ("x", "vol", "strain", "F")),  # update_strain
+        (("stress", "vol") + reads_F, ("stress",) + reads_F),                 # update_stress
     ]
     scratch = 16 + 16 + 24 + 24 + 24  # dx written and read, de written and read twice
     particle = sum(size[f] for r, w in passes for f in r + w) + scratch
@@ -99,7 +101,9 @@ def throughput(args):
     t0 = time.perf_counter()
     interp = getattr(args, "interpolation", "point")
     extra = None if interp == "point" else {"interpolation": interp}
-    warm = Solver(block_scene(1000, args.shape, args.scheme, args.material, extra_solver=extra), MPI.COMM_SELF)
+    track_F = getattr(args, "track_F", False)
+    warm = Solver(block_scene(1000, args.shape, args.scheme, args.material, extra_solver=extra,
+                              track_F=track_F), MPI.COMM_SELF)
     for _ in range(3):
         warm.step()
     del warm
@@ -110,7 +114,8 @@ def throughput(args):
     results = []
     for n in args.particles:
         base = _memory_baseline()
-        solver = Solver(block_scene(n, args.shape, args.scheme, args.material, extra_solver=extra),
+        solver = Solver(block_scene(n, args.shape, args.scheme, args.material, extra_solver=extra,
+                                    track_F=track_F),
                         MPI.COMM_SELF)
         for _ in range(YIELD_AFTER_STEPS):  # first-touch of the arrays; a plastic block yields
             solver.step()
@@ -121,7 +126,8 @@ def throughput(args):
         rate = n_real * args.steps / med
         mem = (_peak_rss_bytes() - base) / n_real
         res = {"particles": n_real, "steps": args.steps, "repeats": args.repeat, "shape": args.shape,
-               "scheme": args.scheme, "material": args.material, "interpolation": interp, "median_s": med,
+               "scheme": args.scheme, "material": args.material, "interpolation": interp,
+               "track_F": solver.keeps_F, "median_s": med,
                "particle_steps_per_s": rate, "ns_per_particle_step": 1e9 / rate,
                "cpu_particle_steps_per_s": n_real * args.steps / cpu,
                "bytes_per_particle": mem, "bytes_moved_per_particle_step": step_bytes_per_particle(solver)}
@@ -157,7 +163,10 @@ def _effect_scenes(n, record):
         "damping": block_scene(n, extra_loads={"damping": 0.5}),
         "ground motion": block_scene(n, extra_loads=gm),
         "large rotations": block_scene(n, extra_solver={"large_rotations": True}),
+        "large rotations (Green-Naghdi)": block_scene(n, extra_solver={"objective_rate": "green_naghdi"}),
+        "deformation gradient kept": block_scene(n, track_F=True),
         "plasticity (smooth_vonmises)": block_scene(n, material="smooth_vonmises"),
+        "hyperelasticity (neo_hookean)": block_scene(n, material="neo_hookean"),
     }
 
 

@@ -25,7 +25,7 @@ from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
-from pmpm.core.particles import DEFORMATION_FIELDS, OPTIONAL_FIELDS, start_deformation
+from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
 from pmpm.errors import ConfigError
@@ -239,25 +239,25 @@ class Solver:
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
-        not ask for them: (de, dw, F, vol0, dtheta). ``dw`` is the spin increment (Jaumann),
-        ``dtheta`` the change of the polar angle of F (Green-Naghdi)."""
+        not ask for them: (de, dw, F, vol0, dq). ``dw`` is the spin increment (Jaumann),
+        ``dq`` the cosine and sine of the change of the polar angle of F (Green-Naghdi)."""
         p, cfg = self.particles, self.scene.solver
         de = self._scratch("_de", (p.n, 3))
-        dw = dtheta = None
+        dw = dq = None
         if cfg.large_rotations:
             if cfg.objective_rate == "green_naghdi":
-                dtheta = self._scratch("_dtheta_buf", (p.n,))
+                dq = self._scratch("_dq_buf", (p.n, 2))
             else:
                 dw = self._scratch("_dw_buf", (p.n,))
-        self._de, self._dw, self._dtheta = de, dw, dtheta
-        return de, dw, p.fields.get("F"), p.fields.get("vol0"), dtheta
+        self._de, self._dw, self._dq = de, dw, dq
+        return de, dw, p.fields.get("F"), p.fields.get("vol0"), dq
 
     def update_strain(self, dt, velocity_field, move=True):
         """Step 10 / eq. 6: strain increment, volume (and F) update, and (``move``) positions."""
         p = self.particles
-        de, dw, F, vol0, dtheta = self._kinematics_outputs()
+        de, dw, F, vol0, dq = self._kinematics_outputs()
         self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dtheta,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq,
             velocity_field, self._dx if move else None, dt,
             self.loads.gravity, None, None, None, *self._geometry())
         if self.interpolation == "cpgimp":
@@ -295,21 +295,29 @@ class Solver:
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         several = len(self.materials) > 1
+        thickness = self.keeps_F and self.scene.formulation == "plane_stress"
         for k, material in enumerate(self.materials):
+            if thickness and not material.needs_deformation_gradient:
+                trace_before = self._scratch("_trace_buf", (p.n,))
+                K.in_plane_trace(p["stress"], trace_before)
             state = {name: p.fields.get(name) for name in material.state_fields}
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
             for name in material.tensor_state_fields:
                 self._rotate(p[name])
             material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
+            if thickness and not material.needs_deformation_gradient:
+                # F33 from szz = 0 (the hyperelastic models solve it themselves)
+                K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
+                                            material.E, material.nu, p["mat"], k if several else -1)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
 
     def _rotate(self, t):
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
         if self._dw is not None:
             K.jaumann_rotate(t, self._dw)
-        elif self._dtheta is not None:
-            K.rotate_by_angle(t, self._dtheta)
+        elif self._dq is not None:
+            K.rotate(t, self._dq)
 
     # -- after the phases ---------------------------------------------------------------------
     def _check_and_next_dt(self):

@@ -83,6 +83,7 @@ COMPONENT_NAMES = {
     "stress": ("sxx", "syy", "sxy", "szz"),
     "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz"),
     "strain": ("exx", "eyy", "gxy"),
+    "F": ("Fxx", "Fxy", "Fyx", "Fyy", "Fzz"),
 }
 
 _TARGET_CHUNK_BYTES = 1 << 20

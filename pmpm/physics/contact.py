@@ -165,10 +165,10 @@ class ContactSolver(Solver):
 
     def update_strain(self, dt, velocity_field, move=True):
         p = self.particles
-        de, dw, F, vol0, dtheta = self._kinematics_outputs()
+        de, dw, F, vol0, dq = self._kinematics_outputs()
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
         self.external_work += KC.g2p_kinematics_bodies(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dtheta, p["body"], self.slot_of,
+            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq, p["body"], self.slot_of,
             _field(velocity_field), self._dx if move else None, dt,
             gravity, load_id, load_w, load_vec, *self._body_geometry())
 

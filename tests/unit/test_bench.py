@@ -41,7 +41,9 @@ def test_effects_prints_every_effect():
                                 "--repeat", "1"])
     assert code == 0
     assert set(summary["effects"]) == {"none", "gravity", "force (step)", "damping", "ground motion",
-                                       "large rotations", "plasticity (smooth_vonmises)"}
+                                       "large rotations", "large rotations (Green-Naghdi)",
+                                       "deformation gradient kept", "plasticity (smooth_vonmises)",
+                                       "hyperelasticity (neo_hookean)"}
     assert summary["effects"]["none"]["overhead"] == 0.0
 
 
@@ -60,3 +62,18 @@ def test_the_plastic_block_yields_before_timing(material):
     phi = np.sqrt(t[:, 0] ** 2 - t[:, 0] * t[:, 1] + t[:, 1] ** 2 + 3 * t[:, 2] ** 2)
     assert np.mean(phi > 0.9 * sy) > 0.6
     assert np.mean(np.abs(s._de).max(axis=1) <= 0.1 * sy / s.materials[0].E) > 0.99
+
+
+def test_throughput_takes_neo_hookean_and_track_F():
+    """--material neo_hookean keeps F (the model needs it); --track-F keeps it for the elastic
+    block, which otherwise does not: the summary says which."""
+    code, _, summary = _run(["bench", "throughput", "--particles", "2000", "--steps", "1",
+                             "--repeat", "1", "--material", "neo_hookean"])
+    assert code == 0 and summary["material"] == "neo_hookean" and summary["track_F"] is True
+    code, _, plain = _run(["bench", "throughput", "--particles", "2000", "--steps", "1", "--repeat", "1"])
+    code_f, _, forced = _run(["bench", "throughput", "--particles", "2000", "--steps", "1",
+                              "--repeat", "1", "--track-F"])
+    assert (code, code_f, plain["track_F"], forced["track_F"]) == (0, 0, False, True)
+    # F (40 B) and vol0 (8 B) read and F written by the kinematics: 88 B more per particle-step
+    assert forced["bytes_moved_per_particle_step"] - plain["bytes_moved_per_particle_step"] == \
+        pytest.approx(88.0, abs=1.0)

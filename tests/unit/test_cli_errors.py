@@ -75,6 +75,11 @@ CASES = {
     "nu-below-minus-one": (replace("nu = 0.3", "nu = -1.2"), "case.toml: materials.steel.nu: must be > -1 (got -1.2)"),
     "cfl-above-one": (replace("end_time = 0.01", "end_time = 0.01\ncfl = 1.5"),
                       "case.toml: solver.cfl: must be <= 1 (got 1.5)"),
+    "unknown-objective-rate": (replace("end_time = 0.01", 'end_time = 0.01\nobjective_rate = "truesdell"'),
+                               "case.toml: solver.objective_rate: must be one of jaumann, green_naghdi"),
+    "rate-without-rotations": (replace("end_time = 0.01", 'end_time = 0.01\nobjective_rate = "green_naghdi"\n'
+                                                          'large_rotations = false'),
+                               "case.toml: solver.objective_rate: needs large_rotations = true"),
     "undefined-material": (replace('material = "steel"', 'material = "stel"'), "case.toml: bodies[0].material: no material 'stel'"),
     "output-field-typo": (append('[output]\nfields = ["x", "stres"]'), "case.toml: output.fields: no particle field 'stres'"),
     "malformed-toml": (replace("E = 100.0", "E = 100.0.0"), "case.toml: not valid TOML"),

@@ -41,9 +41,9 @@ def test_kinematics_kernel_matches_reference(name):
     G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
     G[..., K.REMAP:K.REMAP + 2] = vel
     n = len(x)
-    de, dw, dtheta = np.empty((n, 3)), np.empty(n), np.empty(n)
+    de, dw, dq = np.empty((n, 3)), np.empty(n), np.empty((n, 2))
     vol, Fk = vol0.copy(), F.copy()
-    K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dtheta, K.REMAP, None, dt,
+    K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dq, K.REMAP, None, dt,
                      None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
     r_de, r_dw, r_F, r_vol, r_dtheta = g2p_kinematics_reference(ORDER[name], x, vel, F, vol0, dt,
                                                                 ORIGIN, H, CELLS)
@@ -51,7 +51,9 @@ def test_kinematics_kernel_matches_reference(name):
     np.testing.assert_allclose(dw, r_dw, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(Fk, r_F, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(vol, r_vol, rtol=1e-12, atol=1e-14)
+    dtheta = np.arctan2(dq[:, 1], dq[:, 0])
     np.testing.assert_allclose(dtheta, r_dtheta, rtol=1e-9, atol=1e-11)  # eigh of F^T F: ~1e-13
+    np.testing.assert_allclose(np.hypot(dq[:, 0], dq[:, 1]), 1.0, rtol=1e-14)  # a rotation
     assert np.abs(dtheta).max() > 1e-3  # the angles moved: the comparison means something
 
 
@@ -93,7 +95,7 @@ def test_rigid_rotation_turns_F_into_the_rotation():
     np.testing.assert_allclose(F, np.tile([1.0, -wdt, wdt, 1.0, 1.0], (len(F), 1)), rtol=0, atol=1e-13)
     vol = s.particles["vol"][deep] / s.particles["vol0"][deep]
     np.testing.assert_allclose(vol, 1 + wdt ** 2, rtol=1e-13)
-    np.testing.assert_allclose(s._dtheta[deep], math.atan(wdt), rtol=1e-11)
+    np.testing.assert_allclose(np.arctan2(s._dq[deep, 1], s._dq[deep, 0]), math.atan(wdt), rtol=1e-11)
 
 
 def test_inverted_F_stops_the_run_naming_the_particle():
@@ -121,3 +123,66 @@ def test_objective_rate_config():
         _spin_scene(objective_rate="truesdell")
     with pytest.raises(ConfigError, match="solver.objective_rate"):
         _spin_scene(objective_rate="jaumann", large_rotations=False)
+
+
+@pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
+def test_thickness_stretch_of_a_hypoelastic_material(formulation):
+    """Uniaxial strain L = diag(a, 0) of linear_elastic, driven through the solver's phases:
+    in plane stress szz = 0 gives d_ezz = -nu / (1 - nu) d_exx each step, so after n steps
+    F33 = (1 - nu/(1 - nu) a dt)^n (to round-off); in plane strain F33 stays 1."""
+    nu, a, dt, n = 0.3, 2.0, 1e-3, 50
+    scene = parse_scene({
+        "formulation": formulation,
+        "grid": {"origin": [0.0, 0.0], "cell_size": 0.25, "cells": [6, 6]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e9, "nu": nu, "density": 1000.0}},
+        "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.5, 0.5], "upper": [1.0, 1.0]}],
+        "solver": {"end_time": 1.0},
+        "output": {"fields": ["x", "F"]},
+    }, "stretch.toml")
+    s = Solver(scene, MPI.COMM_SELF)
+    w, g = s.window, s.grid
+    x = g.origin[0] + (w.ox + np.arange(w.shape[0])) * g.h
+    for _ in range(n):
+        w.G[...] = 0.0
+        w.G[:, :, K.REMAP] = a * x[:, None]  # v_x = a x
+        s.update_strain(dt, K.REMAP, move=False)
+        s.update_stress()
+    F = s.particles["F"]
+    np.testing.assert_allclose(F[:, 0], (1 + a * dt) ** n, rtol=1e-12)
+    expect = (1 - nu / (1 - nu) * a * dt) ** n if formulation == "plane_stress" else 1.0
+    np.testing.assert_allclose(F[:, 4], expect, rtol=1e-12)
+
+
+def test_restart_continues_F(tmp_path, monkeypatch):
+    """F is a particle field like the others: checkpointed and read back, so a neo-Hookean bar
+    run to t = 1 and restarted to t = 2 ends with the F, stress and positions of a run straight
+    to t = 2 (bit for bit: the same steps, operations and order on one rank; a fixed step that
+    is a power of two lands both runs on t = 1 exactly)."""
+    import contextlib
+    import io
+    import os
+
+    import h5py
+
+    from pmpm.cli import main
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    bar = open(os.path.join(root, "cases", "bar.toml")).read()
+    bar = bar.replace('type = "linear_elastic"', 'type = "neo_hookean"').replace(
+        "interval = 0.5", "interval = 0.5\ncheckpoint_interval = 1.0").replace(
+        'fields = ["x", "v", "stress", "strain"]', 'fields = ["x", "v", "stress", "F"]').replace(
+        "cfl = 0.5", "time_step = 0.0078125")  # 2^-7 s: t = 1 exactly after 128 steps in both runs
+    assert 'type = "neo_hookean"' in bar and '"F"]' in bar and "time_step" in bar
+
+    def run(name, end, *extra):
+        (tmp_path / name).write_text(bar.replace("end_time = 10.0", f"end_time = {end}"))
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            assert main([str(tmp_path / name), "--no-plots", *extra]) == 0
+
+    monkeypatch.chdir(tmp_path)
+    run("straight.toml", 2.0)
+    run("bar.toml", 1.0)
+    run("bar.toml", 2.0, "--restart", "bar_results/bar.h5")
+    with h5py.File("straight_results/straight.h5") as a, h5py.File("bar_results/bar.h5") as b:
+        for k in ("x", "stress", "F"):
+            np.testing.assert_array_equal(a["frames"][k][-1], b["frames"][k][-1])
+        assert np.abs(a["frames"]["F"][-1][:, 0] - 1).max() > 1e-3  # the bar is stretched

@@ -265,12 +265,12 @@ def g2p_velocity_bodies(x, m, v, body, slot_of, pic, B, ox, oy, origin, inv_h, n
 
 
 @nb.njit(cache=True)
-def g2p_kinematics_bodies(x, m, vol, strain, de, dw, F, vol0, dtheta, body, slot_of, vel_field, dx, dt,
+def g2p_kinematics_bodies(x, m, vol, strain, de, dw, F, vol0, dq, body, slot_of, vel_field, dx, dt,
                           gravity, load_id, load_w, load_vec,
                           B, ox, oy, origin, inv_h, ncx, ncy, shape):
     """:func:`pmpm.core.kernels.transfer.g2p_kinematics` from each particle's own slot: strain
     increment from its velocity field ``vel_field`` (body layout), volume update (and
-    ``strain`` when not None; ``F``, ``vol0``, ``dtheta`` as there), then (``dx`` not None) the move x += dx. Returns the work of the
+    ``strain`` when not None; ``F``, ``vol0``, ``dq`` as there), then (``dx`` not None) the move x += dx. Returns the work of the
     external forces over the moves."""
     work = 0.0
     for p in range(x.shape[0]):
@@ -297,7 +297,7 @@ def g2p_kinematics_bodies(x, m, vol, strain, de, dw, F, vol0, dtheta, body, slot
                     lyx += gvy * dnx
                     lyy += gvy * dny
         if de is not None:
-            strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dtheta)
+            strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
         if dx is not None:
             work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work

@@ -4,7 +4,7 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["count_strays", "cell_columns", "check_deformation"]
+__all__ = ["count_strays", "cell_columns"]
 
 
 @nb.njit(cache=True)
@@ -34,18 +34,3 @@ def cell_columns(x, origin, inv_h, axis):
     """Cell column index of each particle along ``axis`` (numpy; used only when needed)."""
     return np.floor((x[:, axis] - origin[axis]) * inv_h).astype(np.int64)
 
-
-@nb.njit(cache=True)
-def check_deformation(F):
-    """Number of particles whose deformation gradient ``F`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz) is
-    not finite or has det F <= 0 (in-plane determinant times Fzz), and the index of the first
-    of them (-1 if none)."""
-    bad = 0
-    first = -1
-    for p in range(F.shape[0]):
-        det = (F[p, 0] * F[p, 3] - F[p, 1] * F[p, 2]) * F[p, 4]
-        if not (det > 0.0 and det < math.inf):  # also NaN: every comparison with it is False
-            bad += 1
-            if first < 0:
-                first = p
-    return bad, first

@@ -5,13 +5,11 @@ Both rotate the stress (and the tensor state of the material) before the materia
 increment, sigma <- Q sigma Q^T + C : de: Jaumann with the linearised Q = I + W dt of the spin
 W = skew(L), Green-Naghdi with the exact rotation Q = R_{n+1} R_n^T between the polar
 rotations of F at the step's end and start (in 2-D a rotation by the change of the polar angle,
-see pmpm.core.kernels.transfer.polar_angle).
+see pmpm.core.kernels.transfer.polar_angle; the kinematics kernel gives its cosine and sine).
 """
-import math
-
 import numba as nb
 
-__all__ = ["jaumann_rotate", "rotate_by_angle"]
+__all__ = ["jaumann_rotate", "rotate"]
 
 
 @nb.njit(cache=True)
@@ -29,12 +27,13 @@ def jaumann_rotate(t, dw):
 
 
 @nb.njit(cache=True)
-def rotate_by_angle(t, dtheta):
+def rotate(t, dq):
     """Rotate Voigt tensors ``t`` (N, >=3: xx, yy, xy) exactly, t <- Q t Q^T with Q the
-    rotation by ``dtheta`` (N,) counter-clockwise (the Green-Naghdi update)."""
+    counter-clockwise rotation whose cosine and sine are ``dq`` (N, 2) (the Green-Naghdi
+    update)."""
     for p in range(t.shape[0]):
-        c = math.cos(dtheta[p])
-        s = math.sin(dtheta[p])
+        c = dq[p, 0]
+        s = dq[p, 1]
         txx = t[p, 0]
         tyy = t[p, 1]
         txy = t[p, 2]

@@ -43,15 +43,16 @@ def polar_angle(fxx, fxy, fyx, fyy):
 
 
 @nb.njit(cache=True, inline="always")
-def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dtheta):
+def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq):
     """Particle p's strain increment c L (c = dt / h, L the velocity gradient sums in cell
     units) into ``de``, its spin into ``dw`` (not None), ``strain`` (not None) and volume.
 
     With ``F`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz) not None the deformation gradient is advanced
     by the same velocity gradient, F <- (I + dt L) F (Fzz is the material's: plane stress
     thickness stretch), and the volume is ``vol0`` det F (in-plane det: the volume is the area
-    times the initial thickness, see docs/large_deformation.md); ``dtheta`` (not None) receives
-    the increment of the polar rotation angle of F over the step (Green-Naghdi rate).
+    times the initial thickness, see docs/deformation_gradient.md); ``dq`` (N, 2; not None)
+    receives the cosine and sine of the increment of the polar rotation angle of F over the
+    step (Green-Naghdi rate).
     Without F the volume follows the trace of the increment, vol *= 1 + tr(de)."""
     dexx = c * lxx
     deyy = c * lyy
@@ -79,13 +80,21 @@ def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dth
         F[p, 2] = nyx
         F[p, 3] = nyy
         vol[p] = vol0[p] * (nxx * nyy - nxy * nyx)
-        if dtheta is not None:
-            d = polar_angle(nxx, nxy, nyx, nyy) - polar_angle(fxx, fxy, fyx, fyy)
-            if d > math.pi:
-                d -= 2.0 * math.pi
-            elif d < -math.pi:
-                d += 2.0 * math.pi
-            dtheta[p] = d
+        if dq is not None:
+            # the rotation from polar_angle(old) to polar_angle(new) without trigonometry: the
+            # vectors (F11 + F22, F21 - F12) of the two point along their R (tr U > 0), so the
+            # cosine and sine of the angle between them are their dot and cross products over
+            # the product of their lengths
+            ox = fxx + fyy
+            oy = fyx - fxy
+            qx = nxx + nyy
+            qy = nyx - nxy
+            n2 = (ox * ox + oy * oy) * (qx * qx + qy * qy)
+            # n2 = 0 only when an F is no longer a rotation times a stretch (det F <= 0): NaN
+            # then, and the step's F check stops the run
+            r = 1.0 / math.sqrt(n2) if n2 > 0.0 else math.nan
+            dq[p, 0] = (ox * qx + oy * qy) * r
+            dq[p, 1] = (ox * qy - oy * qx) * r
     else:
         vol[p] *= 1.0 + dexx + deyy
 
@@ -232,7 +241,7 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap,
 
 
 @nb.njit(cache=True)
-def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dtheta, vel_field, dx, dt,
+def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
                    gravity, load_id, load_w, load_vec,
                    G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Strain increment from the grid velocity in ``vel_field`` (paper eq. 6), volume update,
@@ -240,7 +249,7 @@ def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dtheta, vel_field, dx, dt
 
     ``de`` (N, 3) receives the strain increment when not None (``vol`` and, when kept,
     ``strain`` are updated with it); ``dw`` (N,) the spin increment when not None (Jaumann
-    rate); ``F``, ``vol0``, ``dtheta``: the deformation gradient, see :func:`strain_increment`.
+    rate); ``F``, ``vol0``, ``dq``: the deformation gradient, see :func:`strain_increment`.
     Returns the work of the external forces over the moves."""
     work = 0.0
     K = stencil(shape)
@@ -271,7 +280,7 @@ def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dtheta, vel_field, dx, dt
                         lxy += gvx * dny
                         lyx += gvy * dnx
                         lyy += gvy * dny
-                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dtheta)
+                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
             if dx is not None:
                 work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work

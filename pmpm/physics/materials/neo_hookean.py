@@ -69,17 +69,20 @@ def neo_hookean_stress(mu, lam, plane_strain, fxx, fxy, fyx, fyy, s):
     in-plane F ``(fxx, fxy, fyx, fyy)`` (``s``: the previous F33, the Newton start in plane
     stress). Non-finite when det F <= 0 (the solver stops such a run)."""
     j2 = fxx * fyy - fxy * fyx
-    if not plane_strain:
-        s = _thickness_stretch(mu, lam, j2, s)
-    else:
+    if plane_strain:
         s = 1.0
-    J = j2 * s
-    lnJ = math.log(J) if J > 0.0 else math.nan
+        J = j2
+        p = lam * (math.log(J) if J > 0.0 else math.nan) / J
+    else:
+        s = _thickness_stretch(mu, lam, j2, s)
+        J = j2 * s
+        # at the root lam ln J = -mu (s^2 - 1): the same number to round-off, one log fewer,
+        # and szz = mu / J (s^2 - 1) + p is exactly 0
+        p = -mu * (s * s - 1.0) / J if J > 0.0 else math.nan
     bxx = fxx * fxx + fxy * fxy
     byy = fyx * fyx + fyy * fyy
     bxy = fxx * fyx + fxy * fyy
     a = mu / J
-    p = lam * lnJ / J
     sxx = a * (bxx - 1.0) + p
     syy = a * (byy - 1.0) + p
     sxy = a * bxy
