@@ -28,7 +28,10 @@ def warm_kernels(verbose=False):
     import os
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     for solver_class, case, variant in ((Solver, "portal_frame.toml", "elastoplastic"),
-                                        (ContactSolver, "disks_contact.toml", None)):
+                                        (ContactSolver, "disks_contact.toml", None),
+                                        # the B-spline GIMP with neo_hookean and Green-Naghdi
+                                        (Solver, "hard/cantilever_large_rotation.toml", "neo_hookean_h0.25"),
+                                        (Solver, "hard/cantilever_large_rotation.toml", "linear_elastic_h0.25")):
         path = os.path.join(root, "cases", case)
         if os.path.exists(path):
             s = solver_class(load_scene(path, variant)[0], MPI.COMM_SELF)
