@@ -217,7 +217,8 @@ def _run(cmd, tree, env, log):
                               stderr=subprocess.STDOUT, text=True, timeout=TIMEOUT_S)
         code, out = proc.returncode, proc.stdout
     except subprocess.TimeoutExpired as exc:
-        code, out = "timeout", (exc.stdout or b"").decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        out = exc.stdout or ""
+        code, out = "timeout", out.decode(errors="replace") if isinstance(out, bytes) else out
     log.write(f"$ {_label(cmd)}  -> {code}\n{out}\n")
     log.flush()
     return code, time.perf_counter() - t0
