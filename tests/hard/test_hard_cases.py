@@ -3,7 +3,8 @@
 Each scene of cases/hard/ (docs/hard_cases.md says what breaks naive MPM codes there) runs once,
 serially, to its end time. Every case must reach its end time with finite fields, lose no
 particle, and never let its total energy (kinetic + internal work) exceed the initial energy plus
-the external work by more than 2% of the largest energy in play (the issue's tolerance). Further
+the external work by more than 2% of the largest energy in play (the issue's tolerance), and the
+energy it loses is bounded and reported too (the two-sided check below). Further
 tests check that each scene really is as hard as it claims (closing speed, nodal masses, cells
 crossed, depth, swing, load) and, where a closed form exists, that the answer is right.
 
@@ -19,7 +20,7 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from hard_cases import (CASES, ENERGY_TOLERANCE, ROOT, body_frame_energy, body_velocities,  # noqa: E402
-                        exact_load_work, lightest_active_node, load, run_case, wave_speed)
+                        exact_load_work, lightest_active_node, load, refined, run_case, wave_speed)
 
 #: what each case records after every step besides the exact work of its loads
 PROBES = {"sparse_free_surface": lightest_active_node, "travelling_block": body_frame_energy,
@@ -77,6 +78,69 @@ def test_energy_never_exceeds_the_initial_energy_plus_the_exact_work_of_the_load
         f"largest energy in play at t = {rec.t[k]:.4g} s")
 
 
+# -- the other side: the energy lost is bounded and reported ---------------------------------------
+#
+# loss(t) = (initial energy + exact work of the loads - total) / largest energy in play. Plastic
+# work is part of the internal work, so only numerical dissipation and contact lose energy here.
+
+#: no contact and no wall impact: the continuum conserves energy, so a loss is numerical
+#: dissipation, held to the issue's 2% like the excess (the balance is checked both ways)
+CONSERVATIVE = ("travelling_block", "sparse_free_surface", "thin_member", "frame_near_collapse")
+#: cases that lose energy at their resolution by design: the impact (the bodies share one grid
+#: velocity field at contact, an inelastic exchange on the contact nodes) and the high-CFL block
+#: (its initial velocity waves of 1 to 3 cells are not representable on the grid). Both losses
+#: are discretisation errors, so they must vanish under refinement: with dt proportional to h
+#: (fixed CFL) MUSL is first order in time and cubic B-splines second order in space, so the
+#: loss is O(h) at least; the check asks for half that order on a grid twice as fine,
+#: loss(h/2) <= 2^-1/2 loss(h), to allow for the pre-asymptotic range of such coarse scenes.
+CONVERGING = ("impact", "high_cfl")
+#: the cantilever's loss is its inelastic contact with the roller wall at the bottom of the swing
+#: (grid contact removes the normal velocity of the nodes it touches); no closed form bounds it
+#: and a refined grid tears the beam (tried: particles leave the grid at t = 2.03 s), so its
+#: loss is reported only; the swing test below checks the beam comes back
+REPORTED_ONLY = ("cantilever_large_rotation",)
+HALF_ORDER = 2 ** -0.5
+
+LOSSES = {}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _report_losses(request):
+    """Hand the losses to tests/hard/conftest.py, which prints them in the terminal summary
+    (reported whether or not the tests pass; docs/hard_cases.md quotes the numbers)."""
+    request.config.hard_case_losses = LOSSES
+
+
+def _loss(rec):
+    return rec.energy_loss(rec.probes[:, 0])
+
+
+def test_every_case_has_a_loss_check():
+    assert sorted(CONSERVATIVE + CONVERGING + REPORTED_ONLY) == sorted(CASES)
+
+
+@pytest.mark.parametrize("name", CONSERVATIVE + REPORTED_ONLY)
+def test_energy_lost_is_bounded_and_reported(name):
+    loss = _loss(record(name))
+    LOSSES[name] = {"max": float(loss.max()), "final": float(loss[-1])}
+    if name in CONSERVATIVE:
+        k = int(np.argmax(loss))
+        assert loss[k] <= ENERGY_TOLERANCE, (
+            f"{name}: lost {100 * loss[k]:.2f}% of the largest energy in play by t = {record(name).t[k]:.4g} s")
+
+
+@pytest.mark.parametrize("name", CONVERGING)
+def test_energy_lost_falls_under_refinement(name):
+    coarse = _loss(record(name))
+    fine_rec = run_case(refined(load(name)), probe=lambda s: [exact_load_work(s)])
+    assert fine_rec.error is None, fine_rec.error
+    fine = _loss(fine_rec)
+    LOSSES[name] = {"max": float(coarse.max()), "final": float(coarse[-1]), "max at h/2": float(fine.max())}
+    assert coarse.max() > 0  # it does lose energy (else the check says nothing)
+    assert fine.max() <= HALF_ORDER * coarse.max(), (
+        f"{name}: loss {coarse.max():.3%} at h, {fine.max():.3%} at h/2: not converging")
+
+
 # -- each case is as hard as it says, and right where a closed form exists ----------------------
 
 def test_impact_closes_at_a_third_of_the_wave_speed_and_the_disks_bounce_apart():
@@ -98,11 +162,19 @@ def test_travelling_block_crosses_many_cells_without_pumping_its_vibration():
     s = rec.solver
     assert rec.track("front")[-1, 0] > 30 * s.grid.h
     # Vibration energy in the block's own frame (kinetic relative to the centre of mass plus
-    # strain), against its initial value (no strain at t = 0). Crossing cells must not pump it:
-    # measured +7% at its peak with cubic B-splines; linear hat functions pump it by +96%
-    # (cell-crossing noise, docs/hard_cases.md). 20% sits well between the two.
-    initial = _initial_body_frame_kinetic(load("travelling_block"))
-    assert rec.probes[:, 1].max() <= 1.20 * initial
+    # strain), against its initial value (no strain at t = 0). Cell crossing may pump it only by
+    # a discretisation error, which converges with cubic B-splines (first order here: the
+    # position update is first order in dt, and dt is proportional to h) and does not with
+    # linear hat functions, whose force jumps at every crossing (docs/verification.md section 6;
+    # +96% at h, docs/hard_cases.md). So the pumping must fall on a grid twice as fine, by at
+    # least half of first order as in the energy-loss check above: pump(h/2) <= 2^-1/2 pump(h).
+    pump = rec.probes[:, 1].max() / _initial_body_frame_kinetic(load("travelling_block")) - 1
+    fine_scene = refined(load("travelling_block"))
+    fine = run_case(fine_scene, probe=body_frame_energy)
+    assert fine.error is None, fine.error
+    pump_fine = fine.probes.max() / _initial_body_frame_kinetic(fine_scene) - 1
+    assert pump > 0  # it does pump at the scene's resolution (else the check says nothing)
+    assert pump_fine <= HALF_ORDER * pump, f"vibration pumped {pump:.2%} at h, {pump_fine:.2%} at h/2"
 
 
 def _initial_body_frame_kinetic(scene):

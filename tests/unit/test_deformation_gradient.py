@@ -7,7 +7,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.core import kernels as K
-from pmpm.core.kernels.reference import g2p_kinematics_reference
+from pmpm.core.kernels.reference import g2p_deformation_reference
 from pmpm.core.shape import SHAPE_TAGS, SHAPES
 from pmpm.core.solver import Solver
 from pmpm.errors import ConfigError, UnstableRunError
@@ -45,7 +45,7 @@ def test_kinematics_kernel_matches_reference(name):
     vol, Fk = vol0.copy(), F.copy()
     K.g2p_kinematics(x, np.ones(n), vol, None, de, dw, Fk, vol0, dq, K.REMAP, None, dt,
                      None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
-    r_de, r_dw, r_F, r_vol, r_dtheta = g2p_kinematics_reference(ORDER[name], x, vel, F, vol0, dt,
+    r_de, r_dw, r_F, r_vol, r_dtheta = g2p_deformation_reference(ORDER[name], x, vel, F, vol0, dt,
                                                                 ORIGIN, H, CELLS)
     np.testing.assert_allclose(de, r_de, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(dw, r_dw, rtol=1e-12, atol=1e-12)

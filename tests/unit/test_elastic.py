@@ -1,4 +1,4 @@
-"""Linear elastic update against D of design.md section 5 (plane stress) and Lame (plane strain)."""
+"""Linear elastic update against D of docs/verification.md section 1 (plane stress) and Lame (plane strain)."""
 import math
 
 import numpy as np

@@ -123,7 +123,7 @@ def test_cantilever_step_load_peaks_at_twice_static():
 
 
 def test_portal_frame_lateral_stiffness():
-    # design.md: direct stiffness with axial shortening 2.01e7 N/m (3%); the inextensible slope-deflection
+    # docs/verification.md section 2: direct stiffness with axial shortening 2.01e7 N/m (3%); the inextensible slope-deflection
     # closed form 2.06e7 N/m neglects axial shortening and so sits a few per cent higher (5%).
     k = fbm.portal_frame_stiffness()
     assert k == pytest.approx(2.01e7, rel=3e-2)
@@ -140,14 +140,14 @@ def test_portal_frame_clear_span_is_stiffer_and_quicker():
 
 
 def test_portal_frame_first_period():
-    # design.md: effective sway mass 640-810 kg on 2.01e7 N/m gives 0.035-0.04 s; bracket 0.03-0.045 s.
+    # docs/verification.md section 2: effective sway mass 640-810 kg on 2.01e7 N/m gives 0.035-0.04 s; bracket 0.03-0.045 s.
     periods = fbm.portal_frame_modes()
     assert 0.03 < periods[0] < 0.045
     assert np.all(np.diff(periods) < 0)
 
 
 def test_portal_frame_step_response():
-    # Dominated by the sway mode: first peak near 2P/k (43 mm in design.md) after about half a period.
+    # Dominated by the sway mode: first peak near 2P/k (43 mm, docs/verification.md section 2) after about half a period.
     t, ux = fbm.portal_frame_response(t_end=0.05)
     k, period = fbm.portal_frame_stiffness(), fbm.portal_frame_modes()[0]
     t_peak, peak = fbm.first_peak(t, ux)
@@ -156,7 +156,7 @@ def test_portal_frame_step_response():
 
 
 def test_plastic_helpers():
-    # design.md sections 6-7: My = sigma_y S = 1255 kN m (its S is the handbook 163 in^3, 0.1% below
+    # docs/verification.md section 2: My = sigma_y S = 1255 kN m (its S is the handbook 163 in^3, 0.1% below
     # 2I/d from the rounded I and d: 2e-3); P_c = (2 Mp,col + 2 min(Mp,col, Mp,beam))/h.
     assert fbm.first_yield_base_moment() == pytest.approx(1.255e6, rel=2e-3)
     mp_col, mp_beam = fbm.SIGMA_Y * 3.048e-3, fbm.SIGMA_Y * 1.0488e-3

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from pmpm.core import kernels as K
-from pmpm.core.kernels.reference import g2p_velocity_reference, p2g_reference
+from pmpm.core.kernels.reference import g2p_kinematics_reference, g2p_velocity_reference, p2g_reference
 from pmpm.core.shape import SHAPE_TAGS, SHAPES
 
 ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
@@ -76,6 +76,65 @@ def test_g2p_velocity_matches_reference(name, pic):
     np.testing.assert_allclose(dx, 0.5 * pic_only, rtol=1e-12, atol=1e-12)  # the move, eq. 5
     # the MUSL re-map scattered the new momenta: total momentum is conserved exactly
     np.testing.assert_allclose(G[..., 5:7].sum(axis=(0, 1)), (p["m"][:, None] * v).sum(0), rtol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(SHAPES))
+@pytest.mark.parametrize("field", [K.MOM, K.REMAP])
+def test_g2p_kinematics_matches_reference(name, field):
+    """Strain increment, spin, volume update and move against the twin written from eq. 5-6.
+    A random nodal velocity field has every gradient component, so a wrong component, a
+    wrong sign of the spin or a volume update missing a term shows at order one; the
+    tolerance is round-off of sums of at most 16 O(1) terms."""
+    p = _particles()
+    rng = np.random.default_rng(11)
+    G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
+    G[..., 1:] = rng.normal(size=G[..., 1:].shape)
+    other = K.REMAP if field == K.MOM else K.MOM
+    vel = G[..., field:field + 2].copy()
+    dt = 0.01
+    dx = 1e-3 * rng.normal(size=(len(p["m"]), 2))
+    x, vol = p["x"].copy(), p["vol"].copy()
+    strain = rng.normal(size=(len(p["m"]), 3))
+    strain0 = strain.copy()
+    de, dw = np.empty((len(p["m"]), 3)), np.empty(len(p["m"]))
+    gravity = np.array([0.3, -9.8])
+    work = K.g2p_kinematics(x, p["m"], vol, strain, de, dw, None, None, None, field, dx, dt, gravity,
+                            None, None, None,
+                            G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
+    de_ref, dw_ref, vol_ref, x_ref = g2p_kinematics_reference(ORDER[name], p["x"], p["vol"], vel, dx, dt,
+                                                             ORIGIN, H, CELLS)
+    assert np.abs(de_ref).max() > 1e-3 and np.abs(dw_ref).max() > 1e-3  # the check is not vacuous
+    np.testing.assert_allclose(de, de_ref, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(dw, dw_ref, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(vol, vol_ref, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(strain, strain0 + de_ref, rtol=1e-12, atol=1e-13)
+    np.testing.assert_array_equal(x, x_ref)  # x + dx: one addition, exact
+    # the work of the body force over the moves, sum m g . dx
+    assert work == pytest.approx(float(np.sum(p["m"][:, None] * gravity * dx)), rel=1e-12)
+    # the other velocity field is not read: changing it changes nothing
+    G[..., other:other + 2] += 1.0
+    de2 = np.empty_like(de)
+    K.g2p_kinematics(p["x"].copy(), p["m"], p["vol"].copy(), None, de2, None, None, None, None, field, None,
+                     dt, None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
+    np.testing.assert_array_equal(de2, de)
+
+
+def test_g2p_kinematics_point_load_work():
+    """The work returned with per-particle loads (load_id/load_w, the kernel's own load path)
+    is sum_p (m_p g + w_p F_k) . dx_p."""
+    p = _particles()
+    rng = np.random.default_rng(5)
+    G = np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
+    dx = 1e-3 * rng.normal(size=(len(p["m"]), 2))
+    load_vec = np.array([[1.0, 2.0], [-3.0, 0.5]])
+    gravity = np.array([0.0, -9.8])
+    work = K.g2p_kinematics(p["x"].copy(), p["m"], p["vol"].copy(), None, None, None, None, None, None,
+                            K.MOM, dx, 0.01,
+                            gravity, p["load_id"], p["load_w"], load_vec,
+                            G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS["cubic"])
+    f = p["m"][:, None] * gravity + np.where(p["load_id"][:, None] >= 0,
+                                             p["load_w"][:, None] * load_vec[p["load_id"]], 0.0)
+    assert work == pytest.approx(float(np.sum(f * dx)), rel=1e-12)
 
 
 def test_grid_update_applies_bcs_and_mass_cutoff():

@@ -127,7 +127,7 @@ CYCLE = [4 * EY, -4 * EY, 4 * EY]
 
 
 def bouc_wen_rhs(alpha, n):
-    """design.md section 5: sigma = alpha E eps + (1-alpha) sy z, z' = (1 - |z|^n H2) / eps_y."""
+    """docs/verification.md section 1: sigma = alpha E eps + (1-alpha) sy z, z' = (1 - |z|^n H2) / eps_y."""
     def rhs(y, sgn):
         z = y[1]
         h = abs(z) ** n if z * sgn > 0 else 0.0
@@ -344,7 +344,7 @@ def test_stress_stays_on_the_shifted_surface(path, formulation):
     assert worst <= SY * (1 + 1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="design.md's H2 = step(s . d_eps) is not the consistent "
+@pytest.mark.xfail(strict=True, reason="H2 = step(s . d_eps) (docs/verification.md section 1) is not the consistent "
                    "loading test n.D d_eps > 0 in plane stress; on this path they disagree and Phi "
                    "goes past sy elastically (about 1 %). Remove this marker if H2 is changed.")
 def test_smooth_plane_stress_h2_quirk_on_shear_compression():

@@ -1,4 +1,4 @@
-"""Independent 2-D Euler-Bernoulli frame model of the steel portal frame (design.md, sections 6 and 7).
+"""Independent 2-D Euler-Bernoulli frame model of the steel portal frame (docs/verification.md, section 2).
 
 The MPM run models the frame as plane-stress continuum strips; this module models the same frame with
 classic beam-column elements so tests have a reference that shares no code with pmpm. NumPy only.
@@ -27,7 +27,7 @@ Geometry
 
 Sections
 --------
-``"handbook"`` uses the tabulated A and I of design.md (they include the root fillets). ``"strip"`` uses
+``"handbook"`` uses the tabulated A and I of docs/verification.md section 2 (they include the root fillets). ``"strip"`` uses
 A and I of the idealised plates (flanges bf x tf, web tw over d - 2 tf) that the MPM strips actually carry:
 about 1% (column) and 1.6% (beam) less area and 0.7% / 1.7% less second moment, which lowers the
 lateral stiffness by about 1% (1.991e7 N/m on centre lines) and raises the elastic peak to about 44.2 mm.
@@ -73,7 +73,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-# Material and frame data of design.md section 6 (SI units).
+# Material and frame data of docs/verification.md section 2 (SI units).
 E_STEEL = 207e9
 NU_STEEL = 0.3
 RHO_STEEL = 7850.0
@@ -83,7 +83,7 @@ HEIGHT = 3.658
 LOAD = 444820.0
 
 _SECTIONS = {
-    # W12x120 column and W16x36 beam, as tabulated in design.md
+    # W12x120 column and W16x36 beam, as tabulated in docs/verification.md section 2
     "column": dict(A=0.022774, I=4.4537e-4, Z=3.048e-3, d=0.33325, bf=0.31293, tf=0.028067, tw=0.018034),
     "beam": dict(A=0.0068387, I=1.8647e-4, Z=1.0488e-3, d=0.40284, bf=0.17742, tf=0.010922, tw=0.007493),
 }
@@ -358,7 +358,7 @@ def _strip_section(d, bf, tf, tw):
 
 
 def portal_frame_properties():
-    """Section data of the portal frame (design.md section 6).
+    """Section data of the portal frame (docs/verification.md section 2).
 
     Returns
     -------
@@ -480,7 +480,7 @@ def portal_frame_stiffness(elements_per_member=8, geometry="centreline", section
 
 
 def portal_frame_closed_form_stiffness():
-    """Closed-form sway stiffness of design.md: (24 E Ic / h^3)(12 r + 1)/(12 r + 4), r = (Ib/L)/(2 Ic/h).
+    """Closed-form sway stiffness of docs/verification.md section 2: (24 E Ic / h^3)(12 r + 1)/(12 r + 4), r = (Ib/L)/(2 Ic/h).
 
     Inextensible members, load at beam level (slope-deflection result for a fixed-base portal).
 
@@ -524,7 +524,7 @@ def portal_frame_response(load=LOAD, t_end=0.25, dt=2e-5, elements_per_member=8,
     Parameters
     ----------
     load : float
-        Step load in N, applied at t = 0 and held (design.md: 444.82 kN).
+        Step load in N, applied at t = 0 and held (docs/verification.md section 2: 444.82 kN).
     t_end : float
         End time in s.
     dt : float
@@ -634,7 +634,7 @@ def first_peak(t, u):
 
 
 # --------------------------------------------------------------------------------------------------
-# Plastic checks (design.md section 7)
+# Plastic checks (docs/verification.md section 2)
 # --------------------------------------------------------------------------------------------------
 def sway_collapse_load(sigma_y=SIGMA_Y, height=HEIGHT):
     """Rigid-plastic sway collapse load P_c = (2 Mp,col + 2 min(Mp,col, Mp,beam)) / h.
@@ -651,7 +651,7 @@ def sway_collapse_load(sigma_y=SIGMA_Y, height=HEIGHT):
     Returns
     -------
     float
-        Collapse load in N (about 1.05e6 N with design.md's data, 2.37 times the applied load).
+        Collapse load in N (about 1.05e6 N with the data of docs/verification.md section 2, 2.37 times the applied load).
     """
     mp_col = sigma_y * _SECTIONS["column"]["Z"]
     mp_beam = sigma_y * _SECTIONS["beam"]["Z"]
@@ -669,7 +669,7 @@ def first_yield_base_moment(sigma_y=SIGMA_Y):
     Returns
     -------
     float
-        My in N m (about 1.256e6 N m, design.md's 1255 kN m).
+        My in N m (about 1.256e6 N m, docs/verification.md section 2: 1255 kN m).
     """
     col = _SECTIONS["column"]
     return sigma_y * 2.0 * col["I"] / col["d"]

@@ -1,4 +1,4 @@
-"""Fixed-free elastic bar in axial vibration against its closed form (design.md section 7).
+"""Fixed-free elastic bar in axial vibration against its closed form (docs/verification.md section 3).
 
 u(x, t) = (v0 / omega) sin(omega t) sin(beta x),  beta = pi / (2 L),  omega = beta sqrt(E / rho).
 """
@@ -70,7 +70,7 @@ def test_bar_case_mid_length_displacement_within_one_percent():
 
 @pytest.mark.parametrize("shape", ["quadratic", "cubic"])
 def test_bar_converges_at_second_order(shape):
-    """B-splines converge at about second order in space (design.md section 7); the observed
+    """B-splines converge at about second order in space (docs/verification.md section 6); the observed
     order between successive halvings must be at least 1.8 (small amplitude: no large strain)."""
     v0 = 1e-3
     errors = [run_bar(bar_scene(n, shape, v0), v0)[0] for n in (10, 20, 40, 80)]

@@ -1,4 +1,4 @@
-"""Two elastic disks colliding (Sulsky, Chen & Schreyer 1994; design.md section 7)."""
+"""Two elastic disks colliding (Sulsky, Chen & Schreyer 1994; docs/verification.md section 4)."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The paper's portal frame against independent theory (design.md sections 6 and 7).
+"""The paper's portal frame against independent theory (docs/verification.md sections 2 and 6).
 
 Elastic: the upper-left joint's response is compared with a small Euler-Bernoulli frame model
 (frame_beam_model.py: consistent mass, Newmark) built from the same sections, with the mass of

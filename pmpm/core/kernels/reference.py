@@ -7,7 +7,7 @@ node", independently of the numba code paths.
 import numpy as np
 
 __all__ = ["bspline_1d", "gimp_1d", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
-           "g2p_kinematics_reference"]
+           "g2p_kinematics_reference", "g2p_deformation_reference"]
 
 
 def _standard(order, xi):
@@ -102,7 +102,27 @@ def g2p_velocity_reference(order, x, v, vel, dvel, pic, origin, h, cells, domain
     return (1 - pic) * flip + pic * np.einsum("pij,ijd->pd", N, vel)
 
 
-def g2p_kinematics_reference(order, x, vel, F, vol0, dt, origin, h, cells):
+def g2p_kinematics_reference(order, x, vol, vel, dx, dt, origin, h, cells):
+    """Strain increment, spin increment, new volume and new position by paper eq. 5-6.
+
+    From the nodal velocities ``vel`` (nx, ny, 2): the velocity gradient
+    L_p = sum_i v_i (grad N_i)^T, so L[d, e] = d v_d / d x_e; the strain increment
+    de = dt (L_xx, L_yy, L_xy + L_yx) (engineering shear), the spin increment
+    dw = dt (L_yx - L_xy) / 2 (the rotation rate of the Jaumann rate, W_yx), the volume
+    V (1 + tr de) and the position x + dx.
+
+    Returns
+    -------
+    de : (P, 3), dw : (P,), vol : (P,), x : (P, 2)
+    """
+    _, dN = basis_matrix(order, x, origin, h, cells)
+    L = np.einsum("ijd,pije->pde", vel, dN)
+    de = dt * np.stack([L[:, 0, 0], L[:, 1, 1], L[:, 0, 1] + L[:, 1, 0]], axis=-1)
+    dw = 0.5 * dt * (L[:, 1, 0] - L[:, 0, 1])
+    return de, dw, vol * (1.0 + de[:, 0] + de[:, 1]), x + dx
+
+
+def g2p_deformation_reference(order, x, vel, F, vol0, dt, origin, h, cells):
     """The kinematics of the step from nodal velocities ``vel`` (nx, ny, 2), written from the
     equations as matrices: L = sum_i v_i (x) grad N_i, de = sym(L) dt (Voigt, engineering
     shear), spin dw = skew(L)_yx dt, F <- (I + dt L) F (the 2x2 block of ``F`` (P, 5); Fzz

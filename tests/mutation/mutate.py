@@ -1,0 +1,327 @@
+#!/usr/bin/env python
+"""Targeted mutation testing: plant one plausible physics bug at a time in a scratch copy of the
+repository and check that the tests named for it fail.
+
+Usage::
+
+    python tests/mutation/mutate.py            # every mutation (docs/testing.md: run time)
+    python tests/mutation/mutate.py --fast     # the CI subset (tests/unit/test_mutation_fast.py)
+    python tests/mutation/mutate.py --only NAME [--only NAME ...]
+    python tests/mutation/mutate.py --list     # names, files and killing tests, nothing run
+
+Each mutation is (name, file, the exact original snippet, its replacement, the test commands
+expected to kill it). The driver
+
+1. checks that every selected snippet occurs exactly once in its file, and stops with exit
+   code 2 naming the ones that do not (the source moved: the list must follow it, it cannot
+   rot silently);
+2. copies the tree (without .git, .venv and caches) into a temporary directory and runs the
+   killing tests there unmutated once (the baseline: a test that already fails kills nothing);
+3. for each mutation: replaces the snippet, runs its tests with PYTHONPATH at the copy and
+   NUMBA_CACHE_DIR in the scratch directory, and restores the file (with its time stamp, so
+   numba's cache of the unmutated sources stays valid);
+4. prints a table and, last, one JSON line; exits 0 when every mutation was killed, 1 otherwise.
+
+pmpm/jitcache.py names the kernel cache by a hash of the numba modules' sources, so a mutated
+kernel compiles afresh (about a minute per mutation of a kernel file; mutations of other files
+reuse the baseline's compiled kernels).
+
+A test command is a list of arguments for ``python -m pytest`` (run in the copy), or, when its
+first element is ``("mpi", n)``, the same under ``mpirun -n n``. "killed" means pytest exited 1
+(tests failed); any other non-zero code (collection error, no test ran) is an error of the
+driver's list, reported as such and counted as not killed.
+"""
+import argparse
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+PYTEST = ["-q", "-x", "-p", "no:cacheprovider", "--no-header", "-o", "addopts="]
+#: a test command that runs longer than this is stopped and the mutation counted as killed
+#: ("timeout": a planted bug that makes a run hang is caught, but the table says so)
+TIMEOUT_S = 900
+
+
+def mpi(n, *args):
+    """A test command run under ``mpirun -n n``."""
+    return [("mpi", n), *args]
+
+
+KERNELS = "tests/unit/test_kernels.py"
+TWIN = KERNELS + "::test_g2p_kinematics_matches_reference"
+PHASES = "tests/unit/test_solver_phases.py"
+
+#: (name, file, original, replacement, test commands); ``fast`` names the CI subset
+MUTATIONS = [
+    dict(name="jaumann_spin_sign", file="pmpm/core/kernels/transfer.py",
+         original="dw[p] = 0.5 * c * (lyx - lxy)", replacement="dw[p] = 0.5 * c * (lxy - lyx)",
+         tests=[[TWIN]],
+         why="the spin of the Jaumann rate with the wrong sign (rotates the stress the other way)"),
+    dict(name="musl_strain_from_updated_velocity", file="pmpm/core/schemes.py",
+         original="s.grid_velocity(source=REMAP, target=REMAP)\n        s.update_strain(dt, velocity_field=REMAP, move=True)",
+         replacement="s.grid_velocity(source=REMAP, target=REMAP)\n        s.update_strain(dt, velocity_field=MOM, move=True)",
+         tests=[[PHASES + "::test_musl_strain_comes_from_the_remapped_momenta"]],
+         why="MUSL takes its strain from the updated grid velocity instead of the re-mapped one"),
+    dict(name="volume_update_without_y_strain", file="pmpm/core/kernels/transfer.py",
+         original="vol[p] *= 1.0 + dexx + deyy", replacement="vol[p] *= 1.0 + dexx",
+         tests=[[TWIN]], fast=True,
+         why="the volume update drops the y strain"),
+    dict(name="no_volume_update", file="pmpm/core/kernels/transfer.py",
+         original="vol[p] *= 1.0 + dexx + deyy", replacement="vol[p] *= 1.0",
+         tests=[[TWIN]],
+         why="particle volumes never change"),
+    dict(name="tensor_instead_of_engineering_shear", file="pmpm/core/kernels/transfer.py",
+         original="dgxy = c * (lxy + lyx)", replacement="dgxy = 0.5 * c * (lxy + lyx)",
+         tests=[[TWIN]],
+         why="the shear strain increment as tensor shear, half the engineering shear the materials expect"),
+    dict(name="body_force_sign", file="pmpm/core/kernels/transfer.py",
+         original="fy += m[p] * gravity[1]", replacement="fy -= m[p] * gravity[1]",
+         tests=[[KERNELS + "::test_p2g_matches_reference"]],
+         why="gravity's y component with the wrong sign on the grid (and in the external work)"),
+    dict(name="internal_force_sign", file="pmpm/core/kernels/transfer.py",
+         original="c = -vol[p] * inv_h", replacement="c = vol[p] * inv_h",
+         tests=[[KERNELS + "::test_p2g_matches_reference"]],
+         why="f_int = +V sigma . grad N (the material pushes the wrong way)"),
+    dict(name="hardening_term", file="pmpm/physics/materials/smooth_vonmises.py",
+         original="c = alpha * E / (1.0 - alpha)", replacement="c = alpha * E",
+         tests=[["tests/unit/test_plasticity_point.py::test_post_yield_tangent_is_alpha_E"]],
+         why="the Ziegler modulus without its 1 / (1 - alpha)"),
+    dict(name="halo_accumulate_overwrites", file="decomposition/decomp.py",
+         original="                    self._columns(arr, cols)[...] += buf",
+         replacement="                    self._columns(arr, cols)[...] = buf",
+         tests=[mpi(2, "tests/mpi/test_decomposition.py::test_halo_sums_equal_serial_sums")], fast=True,
+         why="the halo accumulate replaces the owner's sum by the neighbour's part"),
+    dict(name="halo_fill_adds", file="decomposition/decomp.py",
+         original="                    self._columns(arr, cols)[...] = buf",
+         replacement="                    self._columns(arr, cols)[...] += buf",
+         tests=[mpi(2, "tests/mpi/test_decomposition.py::test_halo_sums_equal_serial_sums")],
+         why="the halo fill adds the owner's value to the ghost's instead of copying it"),
+    dict(name="essential_bc_ignored", file="pmpm/core/kernels/grid_ops.py",
+         original="                    v_new = bc_vel[i, j, d]\n",
+         replacement="                    v_new = v_free\n",
+         tests=[[KERNELS + "::test_grid_update_applies_bcs_and_mass_cutoff"]],
+         why="prescribed nodal velocities are not imposed in the grid update"),
+    dict(name="flip_pic_blend_swapped", file="pmpm/core/kernels/transfer.py",
+         original="nvx = flip * (v[p, 0] + dvx) + pic * vx\n            nvy = flip * (v[p, 1] + dvy) + pic * vy",
+         replacement="nvx = pic * (v[p, 0] + dvx) + flip * vx\n            nvy = pic * (v[p, 1] + dvy) + flip * vy",
+         tests=[[KERNELS + "::test_g2p_velocity_matches_reference"]],
+         why="the FLIP and PIC weights of the velocity update exchanged"),
+    dict(name="cfl_without_particle_speed", file="pmpm/core/solver.py",
+         original="return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)",
+         replacement="return self.scene.solver.cfl * self.grid.h / self.wave_speed",
+         tests=[[PHASES + "::test_cfl_step_is_c_h_over_wave_speed_plus_particle_speed"]],
+         why="the CFL step ignores the particle speed"),
+    dict(name="mass_cutoff_ignored", file="pmpm/core/kernels/grid_ops.py",
+         original="accelerate = mi > mass_cutoff", replacement="accelerate = True",
+         tests=[[KERNELS + "::test_grid_update_applies_bcs_and_mass_cutoff"]],
+         why="nearly empty nodes are accelerated by f / m"),
+    dict(name="cubic_gradient_block", file="pmpm/core/shape.py",
+         original="W[6, q] = -1.5 * f2 + f + 0.5", replacement="W[6, q] = -1.5 * f2 + 2.0 * f + 0.5",
+         tests=[[KERNELS + "::test_p2g_matches_reference"]],
+         why="a wrong cubic B-spline derivative in the block path the transfer kernels use"),
+    dict(name="cubic_gradient_scalar", file="pmpm/core/shape.py",
+         original="g1 = 1.5 * f2 - 2.0 * f", replacement="g1 = 1.5 * f2 - f",
+         tests=[["tests/unit/test_shape.py::test_cubic_gradient_is_derivative_of_weight"]],
+         why="a wrong cubic B-spline derivative in the scalar path (edges, point loads)"),
+    dict(name="plane_stress_thickness_unscaled", file="pmpm/scene/bodies.py",
+         original="thickness = a * w_web + b * w_fl", replacement="thickness = w_web + w_fl",
+         tests=[["tests/unit/test_config.py::test_i_section_matches_area_and_second_moment"]], fast=True,
+         why="the I-section strip's thickness rule without the area / inertia scaling"),
+    dict(name="objective_rate_sign", file="pmpm/core/kernels/objective.py",
+         original="t[p, 0] = txx - 2.0 * w * txy", replacement="t[p, 0] = txx + 2.0 * w * txy",
+         tests=[["tests/unit/test_objective_rate.py::"
+                 "test_many_small_spins_rotate_the_stress_like_the_rotation_matrix"]],
+         why="the Jaumann rotation of sxx with the wrong sign"),
+    dict(name="musl_second_exchange_dropped", file="pmpm/core/schemes.py",
+         original="s.exchange_halo(REMAPPED)\n", replacement="pass  # mutated: no re-map exchange\n",
+         tests=[mpi(2, "tests/mpi/test_same_answer.py::test_bar_same_on_any_rank_count")],
+         why="MUSL's re-mapped momenta not summed across ranks"),
+    dict(name="solver_point_loads_not_scattered", file="pmpm/core/solver.py",
+         original="            K.scatter_point_loads(idx, p[\"x\"], load_id, load_w, load_vec, *self._geometry())",
+         replacement="            pass  # mutated: point loads not scattered",
+         tests=[[PHASES + "::test_particles_to_grid_scatters_internal_body_and_set_forces"]],
+         why="the solver's load path (scatter_point_loads) never reaches the grid"),
+    dict(name="undamped_step_drops_the_force", file="pmpm/core/kernels/grid_ops.py",
+         original="                        f -= damping * G[i, j, 1 + d]\n                    v_new = v_old + f * dt * inv_m",
+         replacement="                        f -= damping * G[i, j, 1 + d]\n                        v_new = v_old + f * dt * inv_m",
+         tests=[["tests/unit/test_effects.py::test_damping_off_is_compiled_out_and_loses_nothing_else"]],
+         why="the specialisation without damping (damping = None) skips the momentum update"),
+    dict(name="spurious_pic_dissipation", file="pmpm/core/solver.py",
+         original='K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,',
+         replacement='K.g2p_velocity(p["x"], p["m"], p["v"], max(0.3, self.scene.solver.pic_blend),',
+         tests=[["tests/hard/test_hard_cases.py::test_energy_lost_is_bounded_and_reported[thin_member]"]],
+         why="a PIC share the scene did not ask for: energy drained, none created"),
+    dict(name="plane_stress_modulus", file="pmpm/physics/materials/linear_elastic.py",
+         original="c = E / (1 - nu * nu)", replacement="c = E",
+         tests=[["tests/unit/test_elastic.py::test_plane_stress_increment_is_D_de"]],
+         why="the plane-stress modulus E / (1 - nu^2) without its denominator"),
+]
+
+
+def _pytest_argv(cmd):
+    """argv of one test command (see the module docstring)."""
+    if cmd and isinstance(cmd[0], tuple):
+        n = cmd[0][1]
+        return ["mpirun", "-n", str(n), "--oversubscribe", "--bind-to", "none",
+                sys.executable, "-m", "pytest", *PYTEST, *cmd[1:]]
+    return [sys.executable, "-m", "pytest", *PYTEST, *cmd]
+
+
+def _label(cmd):
+    if cmd and isinstance(cmd[0], tuple):
+        return f"mpirun -n {cmd[0][1]} " + " ".join(cmd[1:])
+    return " ".join(cmd)
+
+
+def check_snippets(selected, root=ROOT):
+    """Names and reasons of the mutations whose snippet is not exactly once in its file."""
+    bad = []
+    for m in selected:
+        path = root / m["file"]
+        if not path.is_file():
+            bad.append((m["name"], f"{m['file']} does not exist"))
+            continue
+        count = path.read_text().count(m["original"])
+        if count != 1:
+            bad.append((m["name"], f"snippet found {count} times in {m['file']} (must be exactly once)"))
+    return bad
+
+
+def _copy_tree(dest):
+    ignore = shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.pyc", ".pytest_cache",
+                                    "*_results", "results", "*.egg-info")
+    shutil.copytree(ROOT, dest, ignore=ignore, symlinks=True)
+
+
+def _env(tree, cache):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(tree)
+    env["NUMBA_CACHE_DIR"] = str(cache)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    return env
+
+
+def _run(cmd, tree, env, log):
+    """Exit code of one test command in the copy ("timeout" after TIMEOUT_S) and its seconds."""
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(_pytest_argv(cmd), cwd=tree, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, timeout=TIMEOUT_S)
+        code, out = proc.returncode, proc.stdout
+    except subprocess.TimeoutExpired as exc:
+        out = exc.stdout or ""
+        code, out = "timeout", out.decode(errors="replace") if isinstance(out, bytes) else out
+    log.write(f"$ {_label(cmd)}  -> {code}\n{out}\n")
+    log.flush()
+    return code, time.perf_counter() - t0
+
+
+def _status(codes):
+    """killed (a test failed or hung), survived (all passed) or error (the list is wrong)."""
+    if any(c == 1 or c == "timeout" for c in codes):
+        return "killed"
+    if all(c == 0 for c in codes):
+        return "survived"
+    return "error"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--fast", action="store_true", help="only the CI subset")
+    ap.add_argument("--only", action="append", default=[], metavar="NAME", help="only this mutation (repeatable)")
+    ap.add_argument("--list", action="store_true", help="print the mutations and their tests, run nothing")
+    ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run of the killing tests")
+    ap.add_argument("--log", default=None, help="write the tests' output here (default: in the scratch dir, removed)")
+    args = ap.parse_args(argv)
+
+    selected = MUTATIONS
+    if args.only:
+        unknown = sorted(set(args.only) - {m["name"] for m in MUTATIONS})
+        if unknown:
+            print(f"mutate: unknown mutation(s): {', '.join(unknown)}", file=sys.stderr)
+            return 2
+        selected = [m for m in MUTATIONS if m["name"] in args.only]
+    elif args.fast:
+        selected = [m for m in MUTATIONS if m.get("fast")]
+
+    bad = check_snippets(selected)
+    if bad:
+        for name, reason in bad:
+            print(f"mutate: error: {name}: {reason}", file=sys.stderr)
+        return 2
+    if args.list:
+        for m in selected:
+            print(f"{m['name']:36s} {m['file']:45s} {'; '.join(_label(c) for c in m['tests'])}")
+        return 0
+
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="pmpm-mutate-") as scratch:
+        scratch = pathlib.Path(scratch)
+        tree, cache = scratch / "tree", scratch / "numba-cache"
+        _copy_tree(tree)
+        env = _env(tree, cache)
+        log = open(args.log or scratch / "mutate.log", "w")
+        print(f"mutate: {len(selected)} mutation(s) in {tree}", flush=True)
+        baseline_failed = []
+        if not args.no_baseline:
+            seen = []
+            for m in selected:
+                for cmd in m["tests"]:
+                    if cmd not in seen:
+                        seen.append(cmd)
+            for cmd in seen:
+                code, secs = _run(cmd, tree, env, log)
+                print(f"  baseline {_label(cmd)}: {'passes' if code == 0 else f'FAILS ({code})'} ({secs:.0f} s)", flush=True)
+                if code != 0:
+                    baseline_failed.append(_label(cmd))
+            if baseline_failed:
+                print("mutate: error: killing tests fail without any mutation: " + "; ".join(baseline_failed),
+                      file=sys.stderr)
+                return 2
+        rows = []
+        for m in selected:
+            path = tree / m["file"]
+            pristine = ROOT / m["file"]
+            text = path.read_text()
+            path.write_text(text.replace(m["original"], m["replacement"], 1))
+            try:
+                codes, secs = [], 0.0
+                for cmd in m["tests"]:
+                    code, dt = _run(cmd, tree, env, log)
+                    codes.append(code)
+                    secs += dt
+                    if code == 1 or code == "timeout":
+                        break  # killed: the other commands need not run
+            finally:
+                shutil.copy2(pristine, path)  # the original text and time stamp
+            status = _status(codes)
+            rows.append({"name": m["name"], "file": m["file"], "tests": [_label(c) for c in m["tests"]],
+                         "status": status, "codes": codes, "seconds": round(secs, 1)})
+            print(f"  {m['name']}: {status} ({secs:.0f} s)", flush=True)
+        log.close()
+
+    width = max(len(r["name"]) for r in rows)
+    print()
+    print(f"| {'mutation':{width}s} | killed by | result | s |")
+    print(f"| {'-' * width} | --- | --- | --- |")
+    for r in rows:
+        print(f"| {r['name']:{width}s} | {'; '.join(r['tests'])} | {r['status']} | {r['seconds']:.0f} |")
+    killed = [r["name"] for r in rows if r["status"] == "killed"]
+    summary = {"mutations": len(rows), "killed": len(killed),
+               "survived": [r["name"] for r in rows if r["status"] == "survived"],
+               "errors": [r["name"] for r in rows if r["status"] == "error"],
+               "seconds": round(time.perf_counter() - t_start, 1)}
+    print(json.dumps(summary))
+    return 0 if len(killed) == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
