@@ -29,21 +29,27 @@ def base_moments(s, y0=0.1, y1=0.3):
     return out
 
 
-def frame_scene(variant, damping=0.0):
+def frame_scene(variant, damping=0.0, cell_size=None):
     """The scene's ``variant``, with mass-proportional ``damping`` (1/s) through its
-    ``loads.damping`` key when non-zero (validated like any scene file)."""
+    ``loads.damping`` key when non-zero (validated like any scene file), and optionally cells of
+    ``cell_size`` over the same domain (x in [-0.5, 6.6], y in [0, 4.2])."""
     data = read_toml(SCENE)
     data = apply_overrides(data, data["variants"][variant], f"variants.{variant}")
     if damping:
         data = apply_overrides(data, {"loads": {"damping": float(damping)}}, "test")
+    if cell_size:
+        extent = [h * n for h, n in zip([data["grid"]["cell_size"]] * 2, data["grid"]["cells"])]
+        cells = [int(round(e / cell_size)) for e in extent]
+        assert all(abs(n * cell_size - e) < 1e-9 for n, e in zip(cells, extent)), "cells must tile the domain"
+        data["grid"] = dict(data["grid"], cell_size=float(cell_size), cells=cells)
     return dataclasses.replace(parse_scene(data, SCENE), variant=variant)
 
 
 @lru_cache(maxsize=None)
-def run_frame(variant, t_end, damping=0.0, every=20):
+def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None):
     """Run the frame serially to ``t_end`` and sample every ``every`` steps: time, the upper-left
     joint's ux, base moments and energies; the solver is returned for its final state."""
-    scene = frame_scene(variant, damping)
+    scene = frame_scene(variant, damping, cell_size)
     s = Solver(scene, MPI.COMM_SELF)
     tr = Tracker(scene.output.track, s)
     t, ux, moments, energies = [], [], [], []
