@@ -41,12 +41,13 @@ FE_H0, FE_LEVELS, FE_MODES = 0.2, (0, 1, 2), 20
 GCI_SAFETY = 3.0
 
 # MPM at 0.05 and 0.025 m cells (docs/portal_frame.md section 8): first peak (m), its time (s),
-# the estimator's period over 0.1 s (s), and the damped run's drift at T_SETTLE (m).
+# the estimator's period over 0.1 s (s), and the damped run's drift at T_SETTLE divided by
+# (1 - r) as in test (a) (m).
 MPM_CONVERGENCE = {
     "peak": (0.04755336, 0.04773),
     "t_peak": (0.019852, 0.01930),
     "period": (0.0401137, 0.04000),
-    "drift": (0.0240940, 0.02420),
+    "drift": (0.0241146, 0.0241708),
 }
 # truncating the dynamic part to FE_MODES modes moves the FE peak by 0.011 mm of 47.85 (80 modes:
 # docs/portal_frame.md section 8); counted as 0.05% so the bound holds with margin
@@ -89,16 +90,20 @@ def test_fe_model_carries_the_scenes_mass_and_load(fe_study):
 
 
 def test_static_drift_of_a_damped_run_matches_the_fe_model(fe_study):
-    """(a): the tolerance adds the first mode's residual (1 + w1 t) e^(-w1 t) at T_SETTLE under
-    critical damping; the underdamped higher modes decay at least as e^(-alpha t / 2), less."""
+    """(a): under critical damping of the first mode its part of the response has fallen to
+    r = (1 + w1 t) e^(-w1 t) of the static value at T_SETTLE (9e-4): the reading is divided by
+    (1 - r); the first mode carries 97% of the static drift (FE), so that correction is right to
+    0.03 r, and the underdamped higher modes have decayed by e^(-alpha t / 2) = 1e-4 of their
+    3% share; r itself is added to the tolerance to cover both and the slight mismatch of alpha
+    (set from the FE's first period) with the MPM's."""
     drift_fe, e_fe = _fe(fe_study, "drift")
     w1 = 2 * math.pi / fe_study["richardson"]["T1"]["value"]
     run = frame_runs.run_frame("elastic", T_SETTLE, damping=2 * w1)
-    drift = run["ux"][-1]
-    settle = (1 + w1 * T_SETTLE) * math.exp(-w1 * T_SETTLE)
+    settle = (1 + w1 * run["t"][-1]) * math.exp(-w1 * run["t"][-1])   # at the last sample
+    drift = run["ux"][-1] / (1 - settle)
     tol = e_fe + _mpm_error("drift") + settle
-    print(f"static drift: MPM {drift * 1e3:.3f} mm, FE {drift_fe * 1e3:.3f} mm "
-          f"({drift / drift_fe - 1:+.2%}, tolerance {tol:.2%})")
+    print(f"static drift: MPM {drift * 1e3:.3f} mm (read {run['ux'][-1] * 1e3:.3f} mm at {run['t'][-1]:.4f} s), "
+          f"FE {drift_fe * 1e3:.3f} mm ({drift / drift_fe - 1:+.2%}, tolerance {tol:.2%})")
     assert drift == pytest.approx(drift_fe, rel=tol)
 
 
