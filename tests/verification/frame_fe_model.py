@@ -47,19 +47,18 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg as spla
-from skfem import (Basis, BilinearForm, ElementQuad2, ElementVector, LinearForm, MeshQuad,
-                   asm, condense)
+from skfem import Basis, BilinearForm, ElementQuad2, ElementVector, LinearForm, MeshQuad, asm
 from skfem.helpers import ddot, dot, sym_grad, trace
 
 __all__ = ["FrameData", "read_scene", "build_mesh", "FrameFE", "frame_fe", "step_response",
            "first_peak", "peak_and_period", "richardson", "refinement_study", "mpm_track_point",
-           "SCENE"]
+           "Member", "SCENE"]
 
 SCENE = Path(__file__).resolve().parents[2] / "cases" / "portal_frame.toml"
 
@@ -122,7 +121,6 @@ class FrameData:
     track: tuple                       # the tracked point (x, y)
     cell_size: float                   # the MPM grid's cell size and particles per cell
     ppc: int
-    extra: dict = field(default_factory=dict)
 
 
 def read_scene(path=SCENE, variant="elastic", track="upper_left_joint"):

@@ -19,7 +19,6 @@ import sys
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
 sys.path.insert(0, os.path.dirname(__file__))
 import frame_beam_model as beam  # noqa: E402
