@@ -19,7 +19,7 @@ Tolerance, per quantity: tol = e_FE + e_MPM (+ the terms named at each test), wh
   base corners and is the same for every quantity, see docs/portal_frame.md section 8);
 - e_MPM = 2 |q(0.05) - q(0.025)| / |q(0.025)|: the MPM's discretisation error at 0.05 m bounded
   from its own convergence, 0.05 against 0.025 m cells: if the error falls at least like h^1 from
-  0.05 m on (B-splines converge at about second order, docs/verification.md), the 0.05 m error
+  0.05 m on (B-splines converge at about second order, docs/verification.md section 6), the 0.05 m error
   is at most 2^p / (2^p - 1) <= 2 times the difference. Drift and peak do converge so (their
   gaps to the FE model halve from 0.05 to 0.025 m); the period does not converge monotonically
   (+0.07% and -0.30% from the FE), for which the bound is an assumption, not a consequence.
