@@ -166,16 +166,18 @@ def _touched_bodies(cut, points):
 
 
 def _check_band_inside(cut, points, phi):
-    """The band must lie inside the member along n: a band hanging over a member's end
-    would integrate a fraction of the section and report it as the whole."""
-    inner = SectionCut(cut.name, cut.key, cut.center, cut.normal, cut.half_length,
-                       cut.spacing, cut.spacing, cut.body)
-    for sign in (-1, 1):  # the particle rows at both edges of the band must exist
-        inner.center = cut.center + sign * (cut.width - cut.spacing) / 2 * cut.normal
-        edge = inner.weights(points["x"], points["body"])
-        if edge.sum() < 0.5 * phi.sum() * cut.spacing / cut.width:
-            raise ConfigError(cut.key, f"its band (width {cut.width:g} m) leaves the member: move the "
-                                       "cut at least half a band away from the member's end")
+    """The band must lie inside the member along n: a band hanging over a member's end would
+    integrate a part of the section and report it as the whole. Thin probes at the band's
+    centre and just inside both of its edges must each meet as many particles."""
+    probe = SectionCut(cut.name, cut.key, cut.center, cut.normal, cut.half_length,
+                       1e-6 * cut.spacing, cut.spacing, cut.body)
+    counts = []
+    for offset in (0.0, -0.5, 0.5):
+        probe.center = cut.center + offset * (cut.width - 2e-6 * cut.spacing) * cut.normal
+        counts.append(np.count_nonzero(probe.weights(points["x"], points["body"])))
+    if min(counts[1:]) < 0.5 * counts[0]:
+        raise ConfigError(cut.key, f"its band (width {cut.width:g} m) leaves the member: move the "
+                                   "cut at least half a band away from the member's end")
 
 
 def band_rows(cut):
