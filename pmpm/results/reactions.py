@@ -13,13 +13,14 @@ particle momenta (FLIP transfers every nodal velocity change to the particles).
 Nothing of this exists unless a boundary asks for its reaction: the kernel receives ``None``
 and compiles without the bookkeeping. Each rank sums its owned nodes; the sums are added over
 ranks once per sample (by pmpm.results.recorder, together with the section cuts).
-A node inside several boundary boxes reports to the last of them (as its velocity is).
+A node component constrained by several boundary boxes reports to the last of them (whose
+velocity it takes).
 """
 import logging
 
 import numpy as np
 
-from pmpm.physics.boundary import select_nodes
+from pmpm.physics.boundary import COMPONENTS, select_nodes
 
 __all__ = ["Reactions", "node_centroid"]
 logger = logging.getLogger(__name__)
@@ -60,10 +61,11 @@ class Reactions:
 
     def bind(self, window, all_boundaries):
         """Mark which reaction each node of ``window`` reports to (after every new window)."""
-        ids = np.full(window.shape, -1, dtype=np.int32)
+        ids = np.full((*window.shape, 2), -1, dtype=np.int32)
         for k, bc in enumerate(all_boundaries):
             sel = select_nodes(window, bc)
-            ids[sel] = self.index.index(k) if k in self.index else -1
+            for d in COMPONENTS[bc.type]:
+                ids[sel, d] = self.index.index(k) if k in self.index else -1
         x0, y0 = self.grid.node_coords(window.ox, window.oy)
         self._arg = (ids, self.sums, float(x0), float(y0), self.grid.h)
 

@@ -14,7 +14,7 @@ a support the cut's forces are the support's reaction carried to the cut; for a 
 along +x built in at its start under a downward tip load P, V = P and M = P (L - x).
 
 MPM stresses are point values, so the integral over the line is taken as the mean over a band
-of width ``b`` (default: one grid cell) centred on the cut::
+of width ``b`` (default: two grid cells) centred on the cut::
 
     int f t ds  ~  (1/b) sum_p phi_p V_p f_p
 
@@ -41,6 +41,10 @@ from pmpm.errors import ConfigError
 
 __all__ = ["SectionCut", "make_cuts", "particle_spacing", "section_properties"]
 logger = logging.getLogger(__name__)
+
+#: default band width in cells: two cells average out the ringing of period 2h that cubic
+#: B-spline stresses show within a few cells of a support (docs/structural_results.md)
+DEFAULT_WIDTH_CELLS = 2
 
 
 @dataclass
@@ -134,7 +138,8 @@ def _cut(k, cfg, scene, grid):
         tangent = (p2 - p1) / np.linalg.norm(p2 - p1)
         center, normal = 0.5 * (p1 + p2), np.array([tangent[1], -tangent[0]])
         half, b, spacing = 0.5 * float(np.linalg.norm(p2 - p1)), -1, None
-    return SectionCut(cfg.name, key, center, normal, half, cfg.width or grid.h, spacing, b)
+    return SectionCut(cfg.name, key, center, normal, half, cfg.width or DEFAULT_WIDTH_CELLS * grid.h,
+                      spacing, b)
 
 
 def make_cuts(scene, grid, points):

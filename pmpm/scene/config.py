@@ -102,7 +102,7 @@ class SectionConfig:
     segment: Optional[tuple] = None    # ((x1, y1), (x2, y2))
     body: Optional[str] = None         # an i_section body ...
     position: Optional[float] = None   # ... and the distance of the cut from its start (m)
-    width: Optional[float] = None      # band of particles integrated (None: the cell size)
+    width: Optional[float] = None      # band of particles integrated (None: two cells)
     plastic_moment: Optional[float] = None   # Mp (N m); default sigma_y Z of an i_section
     yield_moment: Optional[float] = None     # My (N m); default sigma_y I / (d/2)
 

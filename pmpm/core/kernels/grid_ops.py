@@ -18,7 +18,7 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
     summed over the nodes in ``owned`` = (axis, lo, hi) (ghost nodes are summed by their owner).
 
     ``reaction`` (None: off, compiled out) is ``(ids, sums, x0, y0, h)``: ``ids`` (window
-    shape, int32) the reaction each node reports to (-1: none), ``sums`` (n, 3) to which the
+    shape x 2, int32) the reaction each node's component reports to (-1: none), ``sums`` (n, 3) to which the
     constraint impulses m (v_bc - v_free) of the owned nodes are added as (Jx, Jy, moment of
     J about the grid point (0, 0) of global coordinates), node (i, j) of the window lying at
     (x0 + i h, y0 + j h). Divided by the time over which they were summed they are the
@@ -54,7 +54,7 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
                         # a support that does not move does no work
                         reactions += mi * (v_new - v_free) * v_new
                         if reaction is not None:
-                            b = reaction[0][i, j]
+                            b = reaction[0][i, j, d]
                             if b >= 0:
                                 impulse = mi * (v_new - v_free)
                                 reaction[1][b, d] += impulse

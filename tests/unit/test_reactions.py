@@ -1,0 +1,84 @@
+"""Support reactions (pmpm.results.reactions): the grid update's constraint impulses, their
+moment, the mean over a sampling interval, and that nothing changes when none is asked for."""
+import numpy as np
+import pytest
+
+from pmpm.core import kernels as K
+from pmpm.core.grid import Grid, GridWindow
+from pmpm.results.reactions import Reactions, node_centroid
+from pmpm.scene.config import BoundaryConfig
+
+
+def _grid_state():
+    G = np.zeros((4, 3, K.N_FIELDS))
+    rng = np.random.default_rng(3)
+    G[..., 0] = rng.uniform(1.0, 2.0, (4, 3))
+    G[..., 1:3] = rng.normal(size=(4, 3, 2))   # momentum
+    G[..., 3:5] = rng.normal(size=(4, 3, 2))   # force
+    return G
+
+
+def _bcs():
+    return (BoundaryConfig("floor", "fixed", (0.0, 0.0), (3.0, 0.0), (0.0, 0.0), reaction=True),
+            BoundaryConfig("wall", "roller_y", (3.0, 0.0), (3.0, 2.0), (0.0, 0.0), reaction=True,
+                           moment_about=(1.0, 1.0)))
+
+
+def _window(bcs):
+    from pmpm.physics.boundary import apply_boundary_masks
+    grid = Grid((0.0, 0.0), 1.0, (3, 2))
+    w = GridWindow(grid, 0, (0, 4))
+    apply_boundary_masks(w, bcs)
+    return grid, w
+
+
+def test_impulses_are_the_momentum_the_bcs_remove():
+    """Jx, Jy of each boundary = sum over its nodes of m (v_bc - v_free); its moment about
+    the chosen point = sum (x - p) x J; and the velocities are those of the kernel without
+    the bookkeeping (it only watches)."""
+    bcs = _bcs()
+    grid, w = _window(bcs)
+    G0 = _grid_state()
+    dt = 0.1
+    G_plain = G0.copy()
+    K.grid_update(G_plain, dt, 0.0, w.bc_mask, w.bc_vel, 0, 4, 0, 3, None, np.array([0, 0, 4]))
+    r = Reactions(bcs, grid)
+    r.bind(w, bcs)
+    r.since = 0.0
+    G = G0.copy()
+    K.grid_update(G, dt, 0.0, w.bc_mask, w.bc_vel, 0, 4, 0, 3, None, np.array([0, 0, 4]), r.kernel_arg())
+    np.testing.assert_array_equal(G, G_plain)
+    # the reference: the free velocity every constrained component would have had
+    v_free = (G0[..., 1:3] + dt * G0[..., 3:5]) / G0[..., :1]
+    J = np.where(w.bc_mask.astype(bool), G0[..., :1] * (0.0 - v_free), 0.0)
+    X, Y = w.node_coords()
+    R = r.take(dt, lambda a: a)
+    floor, wall = Y == 0.0, X == 3.0
+    # the corner's x goes to the wall (the later box), its y to the floor (the wall leaves y free)
+    owners = [(floor & ~wall, floor), (wall, np.zeros_like(wall))]
+    for k, (sel_x, sel_y) in enumerate(owners):
+        point = np.array([1.5, 0.0]) if k == 0 else np.array([1.0, 1.0])
+        Jx, Jy = J[sel_x, 0].sum(), J[sel_y, 1].sum()
+        M = (np.sum((X[sel_y] - point[0]) * J[sel_y, 1])
+             - np.sum((Y[sel_x] - point[1]) * J[sel_x, 0]))
+        # tolerance: rounding of sums of a dozen terms
+        np.testing.assert_allclose(R[k], np.array([Jx, Jy, M]) / dt, rtol=1e-12, atol=1e-12)
+    assert R[1, 1] == 0.0   # a roller_y wall takes no vertical force
+
+
+def test_mean_over_the_interval_and_nan_without_one():
+    bcs = _bcs()
+    grid, w = _window(bcs)
+    r = Reactions(bcs, grid)
+    r.bind(w, bcs)
+    assert np.isnan(r.take(0.0, lambda a: a)).all()   # no time has passed since "start"
+    r.sums[:] = [[2.0, 4.0, 0.0], [6.0, 0.0, 0.0]]
+    R = r.take(0.5, lambda a: a)
+    assert R[0, 0] == 4.0 and R[0, 1] == 8.0   # impulse / elapsed time
+    assert not r.sums.any()                     # the next interval starts empty
+
+
+def test_default_moment_point_is_the_node_centroid():
+    grid = Grid((0.0, 0.0), 0.5, (8, 4))
+    bc = BoundaryConfig("b", "fixed", (0.9, -1.0), (2.6, 0.0), (0.0, 0.0), reaction=True)
+    np.testing.assert_allclose(node_centroid(bc, grid), [(1.0 + 1.5 + 2.0 + 2.5) / 4, 0.0])
