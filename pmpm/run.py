@@ -154,8 +154,9 @@ class Run:
                                   {name: rows[:, k, :] for k, name in enumerate(self.tracker.names)})
         self.output.write_energies(dict(zip(ENERGY_COLUMNS, np.array(self.energy_rows).T)))
         if self.structural is not None:
+            attrs = self.structural.attributes()
             for group, columns in self.structural.drain().items():
-                self.output.append_table(group, columns, UNITS)
+                self.output.append_table(group, columns, UNITS, attrs[group])
         self.history_t, self.history_rows, self.energy_rows = [], [], []
 
     def write_frame(self):

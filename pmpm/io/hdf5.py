@@ -455,15 +455,18 @@ class OutputFile:
             arrays[track] = values.reshape(shape)
         self.n_history += self._append_rows("history", arrays)
 
-    def append_table(self, group, columns, units):
+    def append_table(self, group, columns, units, attrs=None):
         """Append rows to the table ``group`` (e.g. ``"sections/left_base"``): one 1-D dataset
-        per column, created on first use with a ``units`` attribute (SI).
+        per column, created on first use with a ``units`` attribute (SI); ``attrs`` go on
+        the group when it is created.
 
         Collective; the data must be identical on all ranks and include ``"time"``.
         """
         seen = self.__dict__.setdefault("_tables", set())
         if self._meta and group not in self.file:
             grp = self.file.require_group(group)
+            for key, value in (attrs or {}).items():
+                grp.attrs[key] = value
             for name in columns:
                 dset = grp.create_dataset(name, (0,), "f8", maxshape=(None,), chunks=(1024,),
                                           fillvalue=np.nan)

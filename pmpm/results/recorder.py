@@ -68,6 +68,16 @@ class StructuralRecorder:
         self.rows.append((s.t, sections, reactions))
         return sections, reactions
 
+    def attributes(self):
+        """{group path: attrs}: what each table describes (geometry, capacities, points)."""
+        out = {}
+        for cut in self.cuts:
+            out[f"sections/{cut.name}"] = {"center": cut.center, "normal": cut.normal,
+                                           "width": cut.width, **(cut.properties or {})}
+        for k, name in enumerate(self.reaction_names):
+            out[f"reactions/{name}"] = {"moment_about": self.reactions.points[k]}
+        return out
+
     def drain(self):
         """{group path: {column: array}} of the buffered rows (then forgotten)."""
         if not self.rows:

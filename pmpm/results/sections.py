@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pmpm.errors import ConfigError
+from pmpm.results.hinges import cut_properties
 
 __all__ = ["SectionCut", "make_cuts", "particle_spacing", "section_properties"]
 logger = logging.getLogger(__name__)
@@ -58,6 +59,7 @@ class SectionCut:
     width: float        # band width b
     spacing: float      # particle domain length l along n
     body: int           # -1: any body (segment cuts)
+    properties: dict = None  # A, I, Z and capacities (pmpm.results.hinges)
 
     @property
     def tangent(self):
@@ -161,6 +163,7 @@ def make_cuts(scene, grid, points):
         if not phi.any():
             raise ConfigError(cut.key, "misses every member (no particle on the cut)")
         _check_band_inside(cut, points, phi)
+        cut.properties = cut_properties(cut, cfg, scene, points)
         cuts.append(cut)
     return cuts
 
