@@ -328,6 +328,20 @@ def _sections(t, bodies, grid):
     return tuple(out)
 
 
+def _check_hysteresis(scene):
+    """The hysteresis plot needs recorded reactions, and names only those."""
+    spec = scene.output.hysteresis
+    if spec is None:
+        return
+    recorded = [b.name for b in scene.boundaries if b.reaction]
+    if not recorded:
+        raise ConfigError("output.hysteresis", "needs reactions (output.reactions = true or a boundary's reaction)")
+    for name in spec["reactions"] or ():
+        if name not in recorded:
+            raise ConfigError("output.hysteresis.reactions", f"no recorded reaction {name!r} "
+                                                             f"(recorded: {', '.join(recorded)})")
+
+
 def _hysteresis(t, names):
     """``[output.hysteresis]``: base shear (sum of the listed reactions' Rx, or Ry) against
     a tracked point's displacement, drawn after the run."""
@@ -501,6 +515,7 @@ def parse_scene(data, path="<scene>"):
                   output=_output(out_table, stem, solver.end_time, state_fields, bodies, grid),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
     scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
+    _check_hysteresis(scene)
     root.finish()
     return scene
 

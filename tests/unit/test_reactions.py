@@ -82,3 +82,24 @@ def test_default_moment_point_is_the_node_centroid():
     grid = Grid((0.0, 0.0), 0.5, (8, 4))
     bc = BoundaryConfig("b", "fixed", (0.9, -1.0), (2.6, 0.0), (0.0, 0.0), reaction=True)
     np.testing.assert_allclose(node_centroid(bc, grid), [(1.0 + 1.5 + 2.0 + 2.5) / 4, 0.0])
+
+
+def test_nothing_exists_when_nothing_is_asked(tmp_path):
+    """A scene without reactions and cuts has no bookkeeping: no Reactions object, no recorder,
+    the grid update gets None (numba compiles the kernel without the branch), no HDF5 group."""
+    import h5py
+    from mpi4py import MPI
+    from pmpm.run import Run
+    from pmpm.scene.config import parse_scene
+    data = {"grid": {"cell_size": 0.5, "cells": [8, 4]},
+            "materials": {"m": {"type": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}},
+            "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.0, 0.0], "upper": [2.0, 1.0]}],
+            "boundary": [{"type": "fixed", "lower": [0.0, 0.0], "upper": [4.0, 0.0]}],
+            "solver": {"end_time": 0.05}, "output": {"directory": str(tmp_path)}}
+    run = Run(parse_scene(data, str(tmp_path / "plain.toml")), MPI.COMM_SELF)
+    assert run.solver.reactions is None and run.solver.sections == [] and run.structural is None
+    run.execute()
+    with h5py.File(run.path) as f:
+        assert "sections" not in f and "reactions" not in f
+    none_type = [sig for sig in K.grid_update.signatures if str(sig[-1]) == "none"]
+    assert none_type, K.grid_update.signatures

@@ -178,3 +178,16 @@ segment = [[2.1, -0.3], [2.1, 0.3]]
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr == f"pmpm: error: {case}: output.section[0].segment: misses every member (no particle on the cut)\n"
     assert [p.name for p in tmp_path.iterdir()] == ["case.toml"]
+
+
+def test_hysteresis_needs_recorded_reactions():
+    data = copy.deepcopy(STRIP)
+    data["output"] = {"track": [{"name": "tip", "point": [2.0, 0.0]}], "hysteresis": {"track": "tip"}}
+    with pytest.raises(ConfigError, match="needs reactions"):
+        parse_scene(data, "strip.toml")
+    data["boundary"] = [{"name": "wall", "type": "fixed", "lower": [-0.2, -0.4], "upper": [0.0, 0.4], "reaction": True}]
+    data["output"]["hysteresis"]["reactions"] = ["floor"]
+    with pytest.raises(ConfigError, match="no recorded reaction 'floor'"):
+        parse_scene(data, "strip.toml")
+    data["output"]["hysteresis"]["reactions"] = ["wall"]
+    assert parse_scene(data, "strip.toml").output.hysteresis["reactions"] == ["wall"]
