@@ -99,20 +99,24 @@ class HingeFrame:
                         K[i, j] += sign * sign2 * kt[k]
         return f, K, tp
 
-    def run(self, load, dt, t_end, sample_every=5, gamma=GAMMA):
-        """Step response to a constant load; returns t, hinge moments, cut moments, drift.
+    def run(self, load, dt, t_end, sample_every=5, gamma=GAMMA, ramp=0.0):
+        """Response to a step load (``ramp`` > 0: rising linearly to ``load`` over ``ramp`` s);
+        returns t, hinge moments, cut moments, drift.
 
         Newmark with gamma >= 1/2 and beta = (gamma + 1/2)^2 / 4, with Newton iterations on the
         hinges; gamma > 1/2 damps the modes far above 1/dt and leaves the sway mode alone."""
         beta = (gamma + 0.5) ** 2 / 4
         n = len(self.free)
         u, v = np.zeros(n), np.zeros(n)
-        F = load * self.load
+        F0 = load * self.load
+        F = F0 if ramp <= 0 else 0.0 * F0
         a = np.linalg.solve(self.M, F)
         out_t, out_h, out_c, out_u = [0.0], [np.zeros(len(self.hinges))], [self.cut_moments(u)], [0.0]
         nsteps = int(round(t_end / dt))
         c0 = 1.0 / (beta * dt * dt)
         for step in range(1, nsteps + 1):
+            if ramp > 0:
+                F = min(step * dt / ramp, 1.0) * F0
             base = u + dt * v + (0.5 - beta) * dt * dt * a   # u_new = base + beta dt^2 a_new
             u_new = u + dt * v
             for _ in range(MAX_NEWTON):
