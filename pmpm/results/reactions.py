@@ -75,7 +75,8 @@ class Reactions:
 
     def take(self, t, allreduce_sum, summed=None):
         """(n, 3) reactions Rx, Ry (N) and M about each boundary's point (N m): the mean since
-        the previous call, over all ranks (NaN if no time passed); the sums restart.
+        the previous call (or since ``since``, set at the start or restart), over all ranks
+        (NaN if no time passed); the sums restart.
         ``summed`` is this rank's sums already added over the ranks (to share an allreduce)."""
         total = allreduce_sum(self.sums.copy()) if summed is None else summed
         self.sums[:] = 0.0

@@ -103,3 +103,40 @@ def test_nothing_exists_when_nothing_is_asked(tmp_path):
         assert "sections" not in f and "reactions" not in f
     none_type = [sig for sig in K.grid_update.signatures if str(sig[-1]) == "none"]
     assert none_type, K.grid_update.signatures
+
+
+def test_restart_continues_the_tables_without_duplicates(tmp_path):
+    """A run stopped after some steps and restarted from its checkpoint: the /reactions and
+    /sections rows are those of the uninterrupted run's time grid, each time once; only the
+    very first reaction row (no interval behind it) is NaN: after the restart the impulses are
+    summed from the restart time."""
+    import dataclasses
+    import h5py
+    from mpi4py import MPI
+    from pmpm.run import Run
+    from pmpm.scene.config import parse_scene
+    data = {"grid": {"cell_size": 0.25, "cells": [12, 6]},
+            "materials": {"m": {"type": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}},
+            "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.0, 0.0], "upper": [2.0, 1.0]}],
+            "boundary": [{"name": "floor", "type": "fixed", "lower": [0.0, 0.0], "upper": [3.0, 0.0]}],
+            "loads": {"gravity": [0.0, -1.0]},
+            "solver": {"end_time": 0.4},
+            "output": {"directory": str(tmp_path), "reactions": True, "history_interval": 0.02,
+                       "checkpoint_interval": 0.1,
+                       "section": [{"name": "mid", "segment": [[1.0, 0.0], [1.0, 1.0]]}]}}
+    scene = parse_scene(data, str(tmp_path / "block.toml"))
+    first = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, max_steps=60))
+    Run(first, MPI.COMM_SELF).execute()
+    run = Run(scene, MPI.COMM_SELF, restart=str(tmp_path / "block.h5"))
+    t_restart = run.solver.t
+    run.execute()
+    with h5py.File(tmp_path / "block.h5") as f:
+        t_hist = f["history/time"][()]
+        for group in ("reactions/floor", "sections/mid"):
+            t = f[group]["time"][()]
+            np.testing.assert_allclose(t, t_hist)            # one row per history time
+            assert np.all(np.diff(t) > 0)
+        Ry = f["reactions/floor/Ry"][()]
+        t = f["reactions/floor/time"][()]
+        assert np.isnan(Ry[0]) and np.isfinite(Ry[1:]).all()
+        assert 0 < t_restart < 0.4
