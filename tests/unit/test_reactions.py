@@ -125,7 +125,7 @@ def test_restart_continues_the_tables_without_duplicates(tmp_path):
                        "checkpoint_interval": 0.1,
                        "section": [{"name": "mid", "segment": [[1.0, 0.0], [1.0, 1.0]]}]}}
     scene = parse_scene(data, str(tmp_path / "block.toml"))
-    first = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, max_steps=60))
+    first = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, max_steps=15))  # dt = 0.0125: stops at 0.1875
     Run(first, MPI.COMM_SELF).execute()
     run = Run(scene, MPI.COMM_SELF, restart=str(tmp_path / "block.h5"))
     t_restart = run.solver.t
