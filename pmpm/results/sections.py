@@ -32,7 +32,6 @@ tests/verification/test_equilibrium.py measures it on a cantilever). Small strai
 rotations are assumed for n, e and b (they are not updated with the deformation).
 """
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,7 +186,3 @@ def _check_band_inside(cut, points, phi):
         raise ConfigError(cut.key, f"its band (width {cut.width:g} m) leaves the member: move the "
                                    "cut at least half a band away from the member's end")
 
-
-def band_rows(cut):
-    """Number of particle rows the band spans (for logs)."""
-    return int(math.floor(cut.width / cut.spacing + 1e-9))

@@ -1,6 +1,5 @@
 """Checks of the plastic-hinge frame model (tests/verification/frame_hinge_model.py), the
 independent reference for the portal frame's hinge order (docs/structural_results.md)."""
-import importlib.util
 import sys
 from pathlib import Path
 

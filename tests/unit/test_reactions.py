@@ -1,7 +1,6 @@
 """Support reactions (pmpm.results.reactions): the grid update's constraint impulses, their
 moment, the mean over a sampling interval, and that nothing changes when none is asked for."""
 import numpy as np
-import pytest
 
 from pmpm.core import kernels as K
 from pmpm.core.grid import Grid, GridWindow

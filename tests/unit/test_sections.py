@@ -12,7 +12,6 @@ import sys
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
 from pmpm.core.grid import Grid
 from pmpm.errors import ConfigError
