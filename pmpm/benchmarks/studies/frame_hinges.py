@@ -59,6 +59,15 @@ def run_factor(factor, outdir, t_end=None):
     return hinge_rows(read_tables(summary["output"])["sections"]), summary["output"]
 
 
+def _finite(x):
+    """``x`` with NaN (a time never reached) as None, so the JSON is standard."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_finite(v) for v in x]
+    return None if isinstance(x, float) and not math.isfinite(x) else x
+
+
 def _table(factor, rows):
     lines = [f"load x{factor:g}", "", "| section | My reached (ms) | Mp reached (ms) | max abs(M)/Mp | max abs(N)/Np |",
              "|---|---|---|---|---|"]
@@ -120,7 +129,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.compare:
         out = {f"{f:g}": compare(f, args.compare) for f in args.factors}
-        print(json.dumps(out, indent=1, default=lambda v: None if not math.isfinite(v) else v))
+        print(json.dumps(_finite(out), indent=1))
         return 0
     from pmpm.log import setup_logging
     setup_logging(0)
@@ -131,8 +140,8 @@ def main(argv=None):
         print(_table(factor, rows), "\n", flush=True)
         if args.json:
             with open(args.json, "w") as fh:
-                json.dump(result, fh, indent=1, default=lambda v: None if not math.isfinite(v) else v)
-    print(json.dumps(result, default=float))
+                json.dump(_finite(result), fh, indent=1)
+    print(json.dumps(_finite(result)))
     return 0
 
 
