@@ -29,6 +29,8 @@ from pmpm.core.particles import OPTIONAL_FIELDS
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import SHAPE_TAGS, ghost_width, min_cells
 from pmpm.errors import ConfigError
+from pmpm.results.reactions import Reactions
+from pmpm.results.sections import make_cuts
 
 __all__ = ["Solver"]
 logger = logging.getLogger(__name__)
@@ -74,6 +76,10 @@ class Solver:
         self.damping = scene.loads.damping or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
         self.n_total = len(points["m"])
+        # structural results the scene asks for (nothing is set up or computed otherwise)
+        self.sections = make_cuts(scene, self.grid, points) if scene.output.sections else []
+        self.reactions = (Reactions(scene.boundaries, self.grid)
+                          if any(b.reaction for b in scene.boundaries) else None)
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
                                          ghost_width(cfg.shape_function), points["x"])
@@ -106,6 +112,8 @@ class Solver:
     def _build_window(self):
         self.window = GridWindow(self.grid, self.axis, self.decomp.window)
         apply_boundary_masks(self.window, self.scene.boundaries)
+        if self.reactions is not None:
+            self.reactions.bind(self.window, self.scene.boundaries)
         w0 = self.decomp.window[0]
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
         if self.ground is not None:
@@ -167,8 +175,10 @@ class Solver:
         w = self.window
         if self.ground is not None:
             self.ground.apply(w, self.t + dt)
+        react = self.reactions.kernel_arg() if self.reactions is not None else None
         damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
-                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local)
+                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
+                                          react)
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
 

@@ -12,10 +12,12 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes"]
+__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "COMPONENTS"]
 logger = logging.getLogger(__name__)
 
-_COMPONENTS = {"fixed": (0, 1), "roller_x": (1,), "roller_y": (0,), "velocity": (0, 1)}
+#: velocity components each boundary type prescribes
+COMPONENTS = {"fixed": (0, 1), "roller_x": (1,), "roller_y": (0,), "velocity": (0, 1)}
+_COMPONENTS = COMPONENTS
 
 
 def _select(X, Y, bc, tol):
