@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up pmpm on a fresh Debian 12 machine (as root) or refresh an existing set-up. Idempotent.
 #   - Open MPI and parallel HDF5 from Debian
-#   - a virtual environment in ./.venv with mpi4py (binary wheel), numba, meshio, matplotlib, pytest
+#   - a virtual environment in ./.venv with mpi4py (binary wheel), numba, meshio, matplotlib, pytest,
+#     scipy and scikit-fem (the portal frame's independent finite-element model in the tests)
 #   - h5py built against Debian's parallel HDF5 (never in an isolated build: that compiles mpi4py, ~21 GB)
 #   - pmpm installed in editable mode, numba's kernel cache warmed from one process
 set -euo pipefail
@@ -27,7 +28,7 @@ fi
 py="$venv/bin/python"
 pip="$py -m pip --disable-pip-version-check -q"
 $pip install --upgrade pip >/dev/null
-$pip install "numpy>=1.26,<2.4" "mpi4py>=4.0" "numba>=0.60" meshio matplotlib "pytest>=7" \
+$pip install "numpy>=1.26,<2.4" "mpi4py>=4.0" "numba>=0.60" meshio matplotlib "pytest>=7" scipy scikit-fem \
     Cython pkgconfig "setuptools>=77" wheel
 
 if ! "$py" -c 'import h5py, sys; sys.exit(0 if h5py.get_config().mpi else 1)' 2>/dev/null; then

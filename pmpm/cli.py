@@ -73,7 +73,11 @@ def _tool(argv):
     outdir = args.outdir or os.path.dirname(os.path.abspath(files[0]))
     if args.tool == "plot":
         from pmpm.io import plot_results
-        for path in plot_results(files, outdir):
+        from pmpm.results.post import structural_outputs
+        made = plot_results(files, outdir)
+        for f in files:
+            made += structural_outputs(f, outdir)
+        for path in made:
             print(f"wrote {path}")
     elif args.format == "vtu":
         from pmpm.io import export

@@ -16,6 +16,7 @@ from pmpm import __version__
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.solver import Solver
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
+from pmpm.results.recorder import UNITS, StructuralRecorder
 
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
@@ -67,6 +68,8 @@ class Run:
         if restart:
             self._restore(restart)
         self.tracker = Tracker(scene.output.track, self.solver)
+        s = self.solver
+        self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
         self.output = self._open_output() if write else None
         self.history_t, self.history_rows, self.energy_rows = [], [], []
         self.initial_energy = None
@@ -137,6 +140,8 @@ class Run:
         self.history_t.append(self.solver.t)
         self.history_rows.append(self.tracker.sample())
         self.energy_rows.append([self.solver.t] + [e[k] for k in ENERGY_COLUMNS[1:]])
+        if self.structural is not None:
+            self.structural.sample()
         if self.initial_energy is None:
             self.initial_energy = e["total"]
         return e
@@ -148,6 +153,10 @@ class Run:
         self.output.write_history(np.array(self.history_t),
                                   {name: rows[:, k, :] for k, name in enumerate(self.tracker.names)})
         self.output.write_energies(dict(zip(ENERGY_COLUMNS, np.array(self.energy_rows).T)))
+        if self.structural is not None:
+            attrs = self.structural.attributes()
+            for group, columns in self.structural.drain().items():
+                self.output.append_table(group, columns, UNITS, attrs[group])
         self.history_t, self.history_rows, self.energy_rows = [], [], []
 
     def write_frame(self):

@@ -29,6 +29,8 @@ from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
 from pmpm.errors import ConfigError
+from pmpm.results.reactions import Reactions
+from pmpm.results.sections import make_cuts
 
 __all__ = ["Solver", "needs_deformation_gradient"]
 logger = logging.getLogger(__name__)
@@ -94,6 +96,10 @@ class Solver:
         self._node_sets = face_node_sets(scene.boundaries, scene.bodies, self.grid, points,
                                          lambda idx: self._points_shape(points, idx))
         self.n_total = len(points["m"])
+        # structural results the scene asks for (nothing is set up or computed otherwise)
+        self.sections = make_cuts(scene, self.grid, points) if scene.output.sections else []
+        self.reactions = (Reactions(scene.boundaries, self.grid)
+                          if any(b.reaction for b in scene.boundaries) else None)
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
                                          ghost_width(cfg.shape_function, cfg.interpolation), points["x"])
@@ -132,6 +138,8 @@ class Solver:
         self.window = GridWindow(self.grid, self.axis, self.decomp.window)
         self.window.node_sets = self._node_sets   # body-attached boundaries' global node masks
         apply_boundary_masks(self.window, self.scene.boundaries)
+        if self.reactions is not None:
+            self.reactions.bind(self.window, self.scene.boundaries)
         w0 = self.decomp.window[0]
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
         if self.ground is not None:
@@ -218,8 +226,10 @@ class Solver:
         w = self.window
         if self.ground is not None:
             self.ground.apply(w, self.t + dt)
+        react = self.reactions.kernel_arg() if self.reactions is not None else None
         damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
-                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local)
+                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
+                                          react)
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
 

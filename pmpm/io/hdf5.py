@@ -456,6 +456,30 @@ class OutputFile:
             arrays[track] = values.reshape(shape)
         self.n_history += self._append_rows("history", arrays)
 
+    def append_table(self, group, columns, units, attrs=None):
+        """Append rows to the table ``group`` (e.g. ``"sections/left_base"``): one 1-D dataset
+        per column, created on first use with a ``units`` attribute (SI); ``attrs`` go on
+        the group when it is created.
+
+        Collective; the data must be identical on all ranks and include ``"time"``.
+        """
+        seen = self.__dict__.setdefault("_tables", set())
+        if self._meta and group not in self.file:
+            grp = self.file.require_group(group)
+            for key, value in (attrs or {}).items():
+                grp.attrs[key] = value
+            for name in columns:
+                dset = grp.create_dataset(name, (0,), "f8", maxshape=(None,), chunks=(1024,),
+                                          fillvalue=np.nan)
+                dset.attrs["units"] = units.get(name, "")
+        elif self._meta and group not in seen:  # a restart: drop the rows it recomputes
+            grp = self.file[group]
+            keep = int(np.sum(grp["time"][()] < np.min(columns["time"])))
+            for dset in grp.values():
+                dset.resize(keep, axis=0)
+        seen.add(group)
+        self._append_rows(group, {c: np.asarray(v, dtype="f8") for c, v in columns.items()})
+
     def write_energies(self, row):
         """Append one energy row, or several at once.
 

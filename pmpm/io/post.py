@@ -39,6 +39,9 @@ def postprocess(scenes, h5_paths):
     for path in h5_paths:
         made += write_history_csv(path, outdir)
     made += plot_results(h5_paths, outdir)
+    from pmpm.results.post import structural_outputs  # sections and reactions, if asked for
+    for path in h5_paths:
+        made += structural_outputs(path, outdir)
     for scene, path in zip(scenes, h5_paths):
         if scene.output.deformed_plot:
             made.append(_deformed(path, scene.output.deformed_plot, outdir))

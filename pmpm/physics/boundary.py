@@ -26,10 +26,13 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "face_node_sets", "FACES"]
+__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "COMPONENTS", "face_node_sets",
+           "FACES"]
 logger = logging.getLogger(__name__)
 
-_COMPONENTS = {"fixed": (0, 1), "roller_x": (1,), "roller_y": (0,), "velocity": (0, 1)}
+#: velocity components each boundary type prescribes
+COMPONENTS = {"fixed": (0, 1), "roller_x": (1,), "roller_y": (0,), "velocity": (0, 1)}
+_COMPONENTS = COMPONENTS
 #: face name -> (axis, side): side -1 the lower extreme of the body along axis, +1 the upper
 FACES = {"left": (0, -1), "right": (0, 1), "bottom": (1, -1), "top": (1, 1)}
 

@@ -57,6 +57,8 @@ class BoundaryConfig:
     velocity: tuple
     body: Optional[str] = None   # body-attached: the body's name and its face (pmpm.physics.boundary)
     face: Optional[str] = None
+    reaction: bool = False                 # record the support reaction (pmpm.results)
+    moment_about: Optional[tuple] = None   # reaction moment point (None: centroid of the nodes)
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,18 @@ class TrackConfig:
 
 
 @dataclass(frozen=True)
+class SectionConfig:
+    """A section cut (pmpm.results.sections): a segment, or a member and a position on it."""
+    name: str
+    segment: Optional[tuple] = None    # ((x1, y1), (x2, y2))
+    body: Optional[str] = None         # an i_section body ...
+    position: Optional[float] = None   # ... and the distance of the cut from its start (m)
+    width: Optional[float] = None      # band of particles integrated (None: two cells)
+    plastic_moment: Optional[float] = None   # Mp (N m); default sigma_y Z of an i_section
+    yield_moment: Optional[float] = None     # My (N m); default sigma_y I / (d/2)
+
+
+@dataclass(frozen=True)
 class OutputConfig:
     directory: str
     interval: float
@@ -109,6 +123,8 @@ class OutputConfig:
     checkpoint_interval: Optional[float]
     deformed_plot: Optional[dict]
     progress_interval: float
+    sections: tuple = ()               # SectionConfig
+    hysteresis: Optional[dict] = None  # base shear against a tracked drift
 
 
 @dataclass(frozen=True)
@@ -230,7 +246,9 @@ def _bodies(root, materials, ppc_default, thickness):
     return tuple(bodies)
 
 
-def _boundaries(root):
+def _boundaries(root, reactions=False):
+    """``[[boundary]]`` tables; ``reactions`` (``output.reactions``) is the default of each
+    boundary's ``reaction`` key."""
     out = []
     for k, t in enumerate(root.tables("boundary")):
         kind = t.string("type", choices=BC_TYPES)
@@ -245,10 +263,116 @@ def _boundaries(root):
         else:
             lower, upper = t.vector("lower"), t.vector("upper")
         vel = t.vector("velocity", (0.0, 0.0)) if kind == "velocity" else (0.0, 0.0)
-        out.append(BoundaryConfig(name=t.string("name", f"boundary{k}"), type=kind,
-                                  lower=lower, upper=upper, velocity=vel, body=body, face=face))
+        name = t.string("name", f"boundary{k}")
+        reaction = t.boolean("reaction", reactions)
+        if reaction:
+            _check_file_name(name, t.path("name"))
+        out.append(BoundaryConfig(name=name, type=kind, lower=lower, upper=upper, velocity=vel,
+                                  reaction=reaction, moment_about=t.vector("moment_about", None),
+                                  body=body, face=face))
         t.finish()
+    names = [b.name for b in out if b.reaction]
+    if len(set(names)) != len(names):
+        raise ConfigError("boundary", "boundaries with reactions need unique names")
     return tuple(out)
+
+
+#: names that become file names (sections, reactions): letters, digits, _ - . ; no leading dot
+_FILE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
+
+
+def _check_file_name(name, key):
+    """Refuse a name that cannot be used as (part of) a file name as it stands."""
+    if not name or len(name) > 64 or name.startswith(".") or not set(name) <= _FILE_NAME_CHARS:
+        raise ConfigError(key, f"{name!r} is not a valid file name (1-64 of letters, digits, "
+                               "'_', '-', '.', not starting with '.')")
+
+
+def _segment(t, name):
+    value = t.raw(name, None)
+    if value is None:
+        return None
+    if (not isinstance(value, list) or len(value) != 2
+            or not all(isinstance(p, list) and len(p) == 2 and all(_finite(c) for c in p) for p in value)):
+        raise ConfigError(t.path(name), f"must be two [x, y] points (got {value!r})")
+    seg = tuple(tuple(float(c) for c in p) for p in value)
+    if seg[0] == seg[1]:
+        raise ConfigError(t.path(name), "the two points must differ")
+    return seg
+
+
+def _sections(t, bodies, grid):
+    """``[[output.section]]``: validated against the scene's bodies and grid (whether the cut
+    meets exactly one member is checked on the particles, pmpm.results.sections)."""
+    out = []
+    lo = grid.origin
+    hi = tuple(o + grid.cell_size * c for o, c in zip(grid.origin, grid.cells))
+    by_name = {b.name: b for b in bodies}
+    for k, s in enumerate(t.tables("section")):
+        name = s.string("name")
+        _check_file_name(name, s.path("name"))
+        segment = _segment(s, "segment")
+        body = s.string("body", None)
+        position = s.number("position", None)
+        if (segment is None) == (body is None):
+            raise ConfigError(s.path("segment"), "give either segment or body (with position)")
+        if body is not None:
+            if body not in by_name:
+                raise ConfigError(s.path("body"), f"no body named {body!r}")
+            geo = by_name[body].geometry
+            if by_name[body].shape != "i_section":
+                raise ConfigError(s.path("body"), f"{body!r} is not an i_section (give a segment)")
+            if position is None:
+                raise ConfigError(s.path("position"), "missing (required with body)")
+            length = math.dist(geo["start"], geo["end"])
+            if not 0 <= position <= length:
+                raise ConfigError(s.path("position"), f"must lie on the member, in [0, {length:g}] m")
+        elif position is not None:
+            raise ConfigError(s.path("position"), "only with body")
+        sec = SectionConfig(name=name, segment=segment, body=body, position=position,
+                            width=s.number("width", None, low=0, low_open=True),
+                            plastic_moment=s.number("plastic_moment", None, low=0, low_open=True),
+                            yield_moment=s.number("yield_moment", None, low=0, low_open=True))
+        s.finish()
+        for p in (segment or ()):
+            if not all(l <= c <= u for l, c, u in zip(lo, p, hi)):
+                raise ConfigError(s.path("segment"), f"point {p} lies outside the grid")
+        out.append(sec)
+    names = [s.name for s in out]
+    if len(set(names)) != len(names):
+        raise ConfigError("output.section", "section names must be unique")
+    return tuple(out)
+
+
+def _check_hysteresis(scene):
+    """The hysteresis plot needs recorded reactions, and names only those."""
+    spec = scene.output.hysteresis
+    if spec is None:
+        return
+    recorded = [b.name for b in scene.boundaries if b.reaction]
+    if not recorded:
+        raise ConfigError("output.hysteresis", "needs reactions (output.reactions = true or a boundary's reaction)")
+    for name in spec["reactions"] or ():
+        if name not in recorded:
+            raise ConfigError("output.hysteresis.reactions", f"no recorded reaction {name!r} "
+                                                             f"(recorded: {', '.join(recorded)})")
+
+
+def _hysteresis(t, names):
+    """``[output.hysteresis]``: base shear (sum of the listed reactions' Rx, or Ry) against
+    a tracked point's displacement, drawn after the run."""
+    if t is None:
+        return None
+    h = {"track": t.string("track"),
+         "component": t.string("component", "ux", choices=("ux", "uy")),
+         "reactions": t.raw("reactions", None)}
+    t.finish()
+    if h["track"] not in names:
+        raise ConfigError(t.path("track"), f"no [[output.track]] named {h['track']!r}")
+    if h["reactions"] is not None and (not isinstance(h["reactions"], list) or not h["reactions"]
+                                       or not all(isinstance(r, str) for r in h["reactions"])):
+        raise ConfigError(t.path("reactions"), "must be a non-empty list of [[boundary]] names")
+    return h
 
 
 def _ground_motion(t):
@@ -317,7 +441,7 @@ def _solver(t):
     return s
 
 
-def _output(t, stem, end_time, state_fields=()):
+def _output(t, stem, end_time, state_fields=(), bodies=(), grid=None):
     t = t or Table({}, "output")
     tracks = []
     for k, tr in enumerate(t.tables("track")):
@@ -350,7 +474,10 @@ def _output(t, stem, end_time, state_fields=()):
         fields=tuple(fields), track=tuple(tracks),
         checkpoint_interval=t.number("checkpoint_interval", None, low=0, low_open=True),
         deformed_plot=deformed_plot,
-        progress_interval=t.number("progress_interval", 2.0, low=0))
+        progress_interval=t.number("progress_interval", 2.0, low=0),
+        sections=_sections(t, bodies, grid) if grid is not None else (),
+        hysteresis=_hysteresis(t.table("hysteresis", None), names))
+    t.used.add("reactions")  # read by _boundaries (it is each boundary's default)
     t.finish()
     return out
 
@@ -407,14 +534,17 @@ def parse_scene(data, path="<scene>"):
     materials, state_fields = _materials(root, formulation)
     solver = _solver(root.table("solver"))
     stem = os.path.splitext(os.path.basename(path))[0]
+    out_table = root.table("output", None)
+    reactions = out_table.boolean("reactions", False) if out_table is not None else False
+    bodies = _bodies(root, materials, ppc, thickness)
     variants = root.raw("variants", {})
     if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
         raise ConfigError("variants", "must be tables [variants.<name>] of dotted-key overrides")
     scene = Scene(path=os.path.abspath(path) if path != "<scene>" else path, title=title,
                   formulation=formulation, thickness=thickness, grid=grid, materials=materials,
-                  bodies=_bodies(root, materials, ppc, thickness), boundaries=_boundaries(root),
+                  bodies=bodies, boundaries=_boundaries(root, reactions),
                   loads=_loads(root), solver=solver,
-                  output=_output(root.table("output", None), stem, solver.end_time, state_fields),
+                  output=_output(out_table, stem, solver.end_time, state_fields, bodies, grid),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
     scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
     names = [b.name for b in scene.bodies]
@@ -423,6 +553,7 @@ def parse_scene(data, path="<scene>"):
             raise ConfigError(f"boundary[{k}].body", f"no body named {bc.body!r} (defined: {', '.join(names)})")
     if scene.contact is not None and solver.interpolation != "point":
         raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
+    _check_hysteresis(scene)
     root.finish()
     return scene
 

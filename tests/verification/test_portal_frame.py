@@ -19,46 +19,19 @@ import sys
 
 import numpy as np
 import pytest
-from mpi4py import MPI
-
-from pmpm.scene.config import load_scene
-from pmpm.core.solver import Solver
-from pmpm.io.tracking import Tracker
 
 sys.path.insert(0, os.path.dirname(__file__))
 import frame_beam_model as beam  # noqa: E402
+import frame_runs  # noqa: E402
 
 T_END = 0.1
 SIGMA_Y, ALPHA, E = 470e6, 0.05, 207e9
 Z_COLUMN = 3.048e-3
-COLUMNS_X = (0.0, 6.096)
 
 
 def _run(variant):
-    scene = load_scene("cases/portal_frame.toml", variant)[0]
-    s = Solver(scene, MPI.COMM_SELF)
-    tr = Tracker(scene.output.track, s)
-    t, ux, moments, energies = [], [], [], []
-    while s.t < T_END:
-        s.step()
-        if s.step_count % 20 == 0:
-            t.append(s.t)
-            ux.append(tr.sample()[0, 0])
-            moments.append(_base_moments(s))
-            energies.append(s.energies())
-    return {"t": np.array(t), "ux": np.array(ux), "moments": np.array(moments),
-            "energies": energies, "solver": s}
-
-
-def _base_moments(s, y0=0.1, y1=0.3):
-    """Bending moment in each column over the band y0 < y < y1 near the base:
-    M = sum sigma_yy (x - x_c) V / (y1 - y0)  (thickness is inside V)."""
-    p = s.particles
-    out = []
-    for xc in COLUMNS_X:
-        band = (np.abs(p["x0"][:, 0] - xc) < 0.2) & (p["x0"][:, 1] > y0) & (p["x0"][:, 1] < y1)
-        out.append(np.sum(p["stress"][band, 1] * (p["x"][band, 0] - xc) * p["vol"][band]) / (y1 - y0))
-    return out
+    # shared with test_frame_continuum.py (one elastic run per session, see frame_runs.py)
+    return frame_runs.run_frame(variant, T_END)
 
 
 def _peak_and_period(t, u):

@@ -5,7 +5,8 @@ __all__ = ["grid_update", "momentum_to_velocity"]
 
 
 @nb.njit(cache=True)
-def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, damping, owned):
+def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, damping, owned,
+                reaction=None):
     """(mv) += f dt, then v = (mv)/m with the BCs imposed, over window rows [i_lo, i_hi) x
     [j_lo, j_hi). Afterwards fields 1, 2 hold the new velocity and 3, 4 the velocity change
     (what FLIP adds to the particles). Nodes lighter than ``mass_cutoff`` get no acceleration.
@@ -14,7 +15,14 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
     -alpha m v. Returns the energy damping dissipated and the work of the support reactions
     (the impulses m (v_bc - v_free) that impose the BCs, times the prescribed velocity: exactly
     zero at fixed supports, a first-order estimate for moving ones),
-    summed over the nodes in ``owned`` = (axis, lo, hi) (ghost nodes are summed by their owner)."""
+    summed over the nodes in ``owned`` = (axis, lo, hi) (ghost nodes are summed by their owner).
+
+    ``reaction`` (None: off, compiled out) is ``(ids, sums, x0, y0, h)``: ``ids`` (window
+    shape x 2, int32) the reaction each node's component reports to (-1: none), ``sums`` (n, 3) to which the
+    constraint impulses m (v_bc - v_free) of the owned nodes are added as (Jx, Jy, moment of
+    J about the grid point (0, 0) of global coordinates), node (i, j) of the window lying at
+    (x0 + i h, y0 + j h). Divided by the time over which they were summed they are the
+    support reactions (pmpm.results.reactions)."""
     dissipated = 0.0
     reactions = 0.0
     for i in range(i_lo, i_hi):
@@ -45,6 +53,15 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
                         # reaction impulse m (v_bc - v_free) times the support's own velocity:
                         # a support that does not move does no work
                         reactions += mi * (v_new - v_free) * v_new
+                        if reaction is not None:
+                            b = reaction[0][i, j, d]
+                            if b >= 0:
+                                impulse = mi * (v_new - v_free)
+                                reaction[1][b, d] += impulse
+                                if d == 0:   # moment z of (Jx, 0) at (x, y): -y Jx
+                                    reaction[1][b, 2] -= (reaction[3] + j * reaction[4]) * impulse
+                                else:        # moment z of (0, Jy): x Jy
+                                    reaction[1][b, 2] += (reaction[2] + i * reaction[4]) * impulse
                 G[i, j, 1 + d] = v_new
                 G[i, j, 3 + d] = v_new - v_old
                 if damping is not None and mine and accelerate:

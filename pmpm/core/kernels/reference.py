@@ -7,7 +7,7 @@ node", independently of the numba code paths.
 import numpy as np
 
 __all__ = ["bspline_1d", "gimp_1d", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
-           "g2p_kinematics_reference", "g2p_deformation_reference"]
+           "g2p_kinematics_reference", "g2p_deformation_reference", "reaction_reference"]
 
 
 def _standard(order, xi):
@@ -147,3 +147,21 @@ def g2p_deformation_reference(order, x, vel, F, vol0, dt, origin, h, cells):
 
     dtheta = np.angle(np.exp(1j * (rotation_angle(new2) - rotation_angle(F2))))
     return de, dw, Fn, vol, dtheta
+
+
+def reaction_reference(G, dt, bc_mask, bc_vel, ids, n, x0, y0, h):
+    """Constraint impulses of the grid update per reaction: (n, 3) of (Jx, Jy, moment about
+    (0, 0)), J = m (v_bc - v_free) with v_free = (mv + f dt) / m, for every node component that
+    ``bc_mask`` constrains and ``ids[i, j, d]`` (>= 0) assigns to a reaction; node (i, j) at
+    (x0 + i h, y0 + j h). No mass cutoff, no damping (as the kernel with those off)."""
+    m = G[..., 0]
+    heavy = m > 0
+    v_free = np.where(heavy[..., None], (G[..., 1:3] + dt * G[..., 3:5]) / np.where(heavy, m, 1.0)[..., None], 0.0)
+    J = np.where(bc_mask.astype(bool) & heavy[..., None], m[..., None] * (bc_vel - v_free), 0.0)
+    X = x0 + h * np.arange(G.shape[0])[:, None] + 0.0 * np.arange(G.shape[1])[None, :]
+    Y = y0 + h * np.arange(G.shape[1])[None, :] + 0.0 * np.arange(G.shape[0])[:, None]
+    out = np.zeros((n, 3))
+    for b in range(n):
+        sx, sy = ids[..., 0] == b, ids[..., 1] == b
+        out[b] = (J[sx, 0].sum(), J[sy, 1].sum(), np.sum(X[sy] * J[sy, 1]) - np.sum(Y[sx] * J[sx, 0]))
+    return out

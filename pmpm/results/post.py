@@ -1,0 +1,74 @@
+"""After a run: the section and reaction tables as CSV files and plots (rank 0 only).
+
+``<stem>_section_<name>.csv`` has columns ``t, N, V, M`` (s, N, N, N m) and
+``<stem>_reaction_<name>.csv`` ``t, Rx, Ry, M``, where ``<stem>`` is the results file's
+(``<scene>[_<variant>]``). Names were checked to be file names when the scene was read.
+"""
+import json
+import logging
+import os
+
+import h5py
+import numpy as np
+
+from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS
+
+__all__ = ["read_tables", "write_csv", "structural_outputs"]
+logger = logging.getLogger(__name__)
+
+
+def read_tables(h5_path):
+    """{"sections": {name: {column: array, "attrs": dict}}, "reactions": {...}}."""
+    out = {"sections": {}, "reactions": {}}
+    with h5py.File(h5_path, "r") as f:
+        for group in out:
+            for name, g in f.get(group, {}).items():
+                table = {c: g[c][()] for c in g}
+                table["attrs"] = {k: v for k, v in g.attrs.items()}
+                out[group][name] = table
+    return out
+
+
+def write_csv(h5_path, outdir, tables=None):
+    """The CSV files of every section and reaction table of ``h5_path``; returns their paths."""
+    tables = tables or read_tables(h5_path)
+    stem = os.path.splitext(os.path.basename(h5_path))[0]
+    paths = []
+    for group, kind, columns in (("sections", "section", SECTION_COLUMNS),
+                                 ("reactions", "reaction", REACTION_COLUMNS)):
+        for name, table in tables[group].items():
+            path = os.path.join(outdir, f"{stem}_{kind}_{name}.csv")
+            header = ",".join(("t",) + columns[1:])
+            np.savetxt(path, np.column_stack([table[c] for c in columns]), delimiter=",",
+                       header=header, comments="", fmt="%.9g")
+            paths.append(path)
+    return paths
+
+
+def _hysteresis_spec(h5_path):
+    with h5py.File(h5_path, "r") as f:
+        scene = json.loads(f.attrs["scene"]) if "scene" in f.attrs else {}
+    return (scene.get("output") or {}).get("hysteresis")
+
+
+def structural_outputs(h5_path, outdir):
+    """CSV files and plots of the structural results of one run (nothing if it has none)."""
+    from pmpm.results import plots
+    tables = read_tables(h5_path)
+    if not tables["sections"] and not tables["reactions"]:
+        return []
+    os.makedirs(outdir, exist_ok=True)
+    stem = os.path.splitext(os.path.basename(h5_path))[0]
+    made = write_csv(h5_path, outdir, tables)
+    if tables["sections"]:
+        made.append(plots.plot_sections(tables["sections"], os.path.join(outdir, f"{stem}_sections.png"), stem))
+        if any("Mp" in s["attrs"] for s in tables["sections"].values()):
+            made.append(plots.plot_utilisation(tables["sections"], os.path.join(outdir, f"{stem}_utilisation.png"), stem))
+            made.append(plots.plot_hinge_map(h5_path, tables["sections"], os.path.join(outdir, f"{stem}_hinges.png"), stem))
+    if tables["reactions"]:
+        made.append(plots.plot_reactions(tables["reactions"], os.path.join(outdir, f"{stem}_reactions.png"), stem))
+    spec = _hysteresis_spec(h5_path)
+    if spec and tables["reactions"]:
+        made.append(plots.plot_hysteresis(h5_path, tables["reactions"], spec,
+                                          os.path.join(outdir, f"{stem}_hysteresis.png"), stem))
+    return made

@@ -1,0 +1,94 @@
+"""Time histories of the section cuts and support reactions a scene asks for.
+
+Sampled at the history times (``output.history_interval``) with ONE allreduce per sample for
+all cuts and reactions together; a scene without cuts and reactions has no recorder at all.
+Rows are buffered and written with the other histories (``/sections/<name>`` and
+``/reactions/<name>`` in the HDF5 file, columns with SI units as attributes).
+"""
+import logging
+
+import numpy as np
+
+__all__ = ["StructuralRecorder", "SECTION_COLUMNS", "REACTION_COLUMNS", "UNITS"]
+logger = logging.getLogger(__name__)
+
+SECTION_COLUMNS = ("time", "N", "V", "M")
+REACTION_COLUMNS = ("time", "Rx", "Ry", "M")
+UNITS = {"time": "s", "N": "N", "V": "N", "M": "N m", "Rx": "N", "Ry": "N"}
+
+
+class StructuralRecorder:
+    """Samples the solver's section cuts and reactions.
+
+    Parameters
+    ----------
+    solver : Solver
+        Its ``sections`` (list of SectionCut) and ``reactions`` (Reactions or None).
+    """
+
+    def __init__(self, solver):
+        self.solver = solver
+        self.cuts = solver.sections
+        self.reactions = solver.reactions
+        self.reaction_names = self.reactions.names if self.reactions is not None else []
+        self._phi, self._phi_of = None, None
+        self.rows = []   # (t, sections (n, 3), reactions (m, 3))
+        if self.reactions is not None:
+            self.reactions.since = solver.t  # impulses are summed from the start (or restart)
+
+    def _weights(self):
+        """Band fractions of every cut for the local particles, found again only when the
+        particle arrays were replaced (sorting, migration, removal)."""
+        p = self.solver.particles
+        if self._phi_of is not p["id"]:
+            self._phi = [(np.flatnonzero(w), w[w > 0]) for w in
+                         (c.weights(p["x0"], p["body"]) for c in self.cuts)]
+            self._phi_of = p["id"]
+        return self._phi
+
+    def local_sections(self):
+        """(n_cuts, 3) this rank's partial N, V, M."""
+        p = self.solver.particles
+        out = np.zeros((len(self.cuts), 3))
+        for k, (cut, (idx, phi)) in enumerate(zip(self.cuts, self._weights())):
+            out[k] = cut.resultants(p["x"][idx], p["stress"][idx], p["vol"][idx], phi)
+        return out
+
+    def sample(self):
+        """Record one row at the solver's time; returns (sections, reactions) arrays."""
+        s = self.solver
+        nc = len(self.cuts)
+        local = [self.local_sections()]
+        if self.reactions is not None:
+            local.append(self.reactions.sums.copy())
+        total = s.decomp.allreduce_sum(np.concatenate(local).ravel()).reshape(-1, 3)
+        sections = total[:nc]
+        reactions = (self.reactions.take(s.t, None, summed=total[nc:])
+                     if self.reactions is not None else np.zeros((0, 3)))
+        self.rows.append((s.t, sections, reactions))
+        return sections, reactions
+
+    def attributes(self):
+        """{group path: attrs}: what each table describes (geometry, capacities, points)."""
+        out = {}
+        for cut in self.cuts:
+            out[f"sections/{cut.name}"] = {"center": cut.center, "normal": cut.normal,
+                                           "width": cut.width, **(cut.properties or {})}
+        for k, name in enumerate(self.reaction_names):
+            out[f"reactions/{name}"] = {"moment_about": self.reactions.points[k]}
+        return out
+
+    def drain(self):
+        """{group path: {column: array}} of the buffered rows (then forgotten)."""
+        if not self.rows:
+            return {}
+        t = np.array([r[0] for r in self.rows])
+        sec = np.array([r[1] for r in self.rows]).reshape(len(t), -1, 3)
+        rea = np.array([r[2] for r in self.rows]).reshape(len(t), -1, 3)
+        self.rows = []
+        out = {}
+        for k, cut in enumerate(self.cuts):
+            out[f"sections/{cut.name}"] = dict(zip(SECTION_COLUMNS, (t, *sec[:, k].T)))
+        for k, name in enumerate(self.reaction_names):
+            out[f"reactions/{name}"] = dict(zip(REACTION_COLUMNS, (t, *rea[:, k].T)))
+        return out
