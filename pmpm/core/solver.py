@@ -98,7 +98,7 @@ class Solver:
         self.n_total = len(points["m"])
         # structural results the scene asks for (nothing is set up or computed otherwise)
         self.sections = make_cuts(scene, self.grid, points) if scene.output.sections else []
-        self.reactions = (Reactions(scene.boundaries, self.grid)
+        self.reactions = (Reactions(scene.boundaries, self.grid, self._node_sets)
                           if any(b.reaction for b in scene.boundaries) else None)
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,

@@ -26,8 +26,12 @@ __all__ = ["Reactions", "node_centroid"]
 logger = logging.getLogger(__name__)
 
 
-def node_centroid(bc, grid):
-    """Centroid of the global grid nodes inside the boundary's box (the default moment point)."""
+def node_centroid(bc, grid, node_sets=None):
+    """Centroid of the global grid nodes inside the boundary's box (the default moment point);
+    for a boundary attached to a body, of its nodes in ``node_sets`` (pmpm.physics.boundary)."""
+    if bc.body is not None:
+        i, j = np.nonzero(node_sets[bc])
+        return np.array([grid.origin[0] + grid.h * i.mean(), grid.origin[1] + grid.h * j.mean()])
     tol = 1e-6 * grid.h
     i = np.arange(grid.nodes[0])
     j = np.arange(grid.nodes[1])
@@ -46,14 +50,16 @@ class Reactions:
     boundaries : sequence of BoundaryConfig
         All of the scene's boundaries (those with ``reaction`` are recorded).
     grid : Grid
+    node_sets : dict, optional
+        The body-attached boundaries' global node masks (``face_node_sets``).
     """
 
-    def __init__(self, boundaries, grid):
+    def __init__(self, boundaries, grid, node_sets=None):
         self.grid = grid
         self.index = [k for k, b in enumerate(boundaries) if b.reaction]
         self.boundaries = [boundaries[k] for k in self.index]
         self.names = [b.name for b in self.boundaries]
-        self.points = np.array([b.moment_about if b.moment_about is not None else node_centroid(b, grid)
+        self.points = np.array([b.moment_about if b.moment_about is not None else node_centroid(b, grid, node_sets)
                                 for b in self.boundaries], dtype=np.float64).reshape(-1, 2)
         self.sums = np.zeros((len(self.boundaries), 3))  # impulses Jx, Jy, moment about (0, 0)
         self.since = None   # time of the last sample

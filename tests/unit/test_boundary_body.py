@@ -128,3 +128,26 @@ def test_cpgimp_domains_follow_the_stretch_and_ugimp_domains_do_not():
             np.testing.assert_array_equal(d, d0)
         else:
             assert d[:, 0].max() > d0[:, 0].max() * 1.01 and d[:, 0].min() < d0[:, 0].min() * 0.99
+
+
+def test_reaction_of_an_attached_clamp_closes_the_momentum_balance():
+    """With the clamp the only support, its reaction impulse is the change of the beam's momentum
+    minus the impulse of gravity: J = P(t) - P(0) - M g t (P(0) = 0). Tolerance 1e-6 relative:
+    the transfers conserve momentum to rounding, but nodes lighter than ``mass_cutoff`` (1e-8 of
+    a particle's mass) get no acceleration, so their share of gravity's impulse is not passed on
+    (measured 4e-8); a reaction missing a node or a component is off by order 1."""
+    scene = _beam(0.25)
+    import dataclasses
+    scene = dataclasses.replace(scene, boundaries=tuple(dataclasses.replace(b, reaction=True)
+                                                        for b in scene.boundaries))
+    s = Solver(scene, MPI.COMM_SELF)
+    s.reactions.since = 0.0
+    while s.t < 0.2:
+        s.step()
+    p = s.particles
+    impulse = s.reactions.take(s.t, lambda a: a)[0, :2] * s.t
+    expected = (p["m"][:, None] * p["v"]).sum(axis=0) - p["m"].sum() * np.array([0.0, -9.8]) * s.t
+    assert abs(expected[1]) > 0.1 * p["m"].sum() * 9.8 * s.t   # the clamp carries real load
+    np.testing.assert_allclose(impulse, expected, rtol=1e-6)
+    # the default moment point is the centroid of the clamp's nodes (on the edge x = 0)
+    assert s.reactions.points[0, 0] == 0.0 and 1.0 < s.reactions.points[0, 1] < 1.5
