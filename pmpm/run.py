@@ -21,8 +21,10 @@ from pmpm.results.recorder import UNITS, StructuralRecorder
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
 
-ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "internal_work", "damping_work",
+ENERGY_COLUMNS = ("time", "kinetic", "strain_energy", "plastic_work", "internal_work", "damping_work",
                   "external_work", "total")
+#: the solver's name of an energy where the file's differs (the file keeps "strain" for the field)
+_SOLVER_ENERGY = {"strain_energy": "strain"}
 
 
 def output_path(scene):
@@ -91,7 +93,8 @@ class Run:
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
-                          append=self.restarted_from is not None, truncate_after=self.restarted_from)
+                          append=self.restarted_from is not None, truncate_after=self.restarted_from,
+                          track_attrs=self.tracker.attrs())
 
     def _restore(self, path):
         from pmpm.io import read_checkpoint
@@ -139,7 +142,7 @@ class Run:
         e = self.solver.energies()
         self.history_t.append(self.solver.t)
         self.history_rows.append(self.tracker.sample())
-        self.energy_rows.append([self.solver.t] + [e[k] for k in ENERGY_COLUMNS[1:]])
+        self.energy_rows.append([self.solver.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
         if self.structural is not None:
             self.structural.sample()
         if self.initial_energy is None:
