@@ -1,9 +1,16 @@
 """Export a results file to other formats: VTU series (meshio) or the XDMF sidecar.
 
-``fmt="vtu"`` writes one ``<stem>_NNNNN.vtu`` per complete frame, each holding the
-particles that exist in that frame (finite position) as ``vertex`` cells with every
-frame field as point data (plus ``id``, the particle id, when it is not a frame
-field), and a ``<stem>.pvd`` collection that ParaView opens as a time series.
+``fmt="vtu"`` writes, into ``<stem>_vtu/`` beside the file (or ``outdir``), one
+``<stem>_NNNNN.vtu`` per complete frame, each holding the particles that exist in that
+frame (finite position) as ``vertex`` cells with every frame field as point data (plus
+``id``, the particle id, when it is not a frame field), and a ``<stem>.pvd`` collection
+that ParaView opens as a time series.  Point data are named as in the XDMF sidecar:
+scalars and 2-vectors (``x``, ``v``) by the field, other fields one array per named
+component (``sxx syy sxy szz``, ``exx eyy gxy``), since VTU files written by meshio
+cannot name the components of one array.
+
+``fmt="xdmf"`` writes ``<stem>.xdmf`` into the file's folder (or ``outdir``), see
+:mod:`pmpm.io.xdmf`.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 
-from pmpm.io.xdmf import write_xdmf
+from pmpm.io.xdmf import view_items, write_xdmf
 
 __all__ = ["export", "FORMATS"]
 
@@ -36,7 +43,9 @@ def _frame_mesh(frames, index):
     data = {"id": alive.astype(np.int64)}
     for name, dset in frames.items():
         if name not in ("time", "step") and dset.ndim >= 2:
-            data[name] = dset[index][alive]
+            rows = dset[index][alive]
+            for label, _, component in view_items(name, dset):
+                data[label] = rows if component is None else rows[(slice(None),) + component]
     cells = [("vertex", np.arange(len(alive), dtype=np.int64)[:, None])]
     return meshio.Mesh(points, cells, point_data=data)
 

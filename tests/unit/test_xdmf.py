@@ -186,8 +186,21 @@ def test_export_vtu_round_trip(results, tmp_path):
             np.testing.assert_array_equal(mesh.points[:, :2], x[alive])
             assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(alive)
             np.testing.assert_array_equal(mesh.point_data["id"], alive)
-            for name in FRAME_FIELDS:
+            for name in ("x", "v", "mat", "eps_p_eq"):
                 np.testing.assert_array_equal(mesh.point_data[name], f["frames"][name][frame][alive])
+            # several components: one array each, named
+            for k, name in enumerate(("sxx", "syy", "sxy", "szz")):
+                np.testing.assert_array_equal(mesh.point_data[name], f["frames/stress"][frame][alive, k])
+            np.testing.assert_array_equal(mesh.point_data["gxy"], f["frames/strain"][frame][alive, 2])
+            assert "stress" not in mesh.point_data
+
+
+def test_export_default_folders(results):
+    paths = export(results, "vtu")
+    folder = os.path.join(os.path.dirname(results), "res_vtu")
+    assert all(os.path.dirname(p) == folder for p in paths) and len(paths) == len(TIMES) + 1
+    (xdmf,) = export(results, "xdmf")
+    assert xdmf == os.path.join(os.path.dirname(results), "res.xdmf")
 
 
 def test_export_other_formats(results, tmp_path):
@@ -195,3 +208,23 @@ def test_export_other_formats(results, tmp_path):
     assert os.path.exists(xdmf) and ET.parse(xdmf).getroot().tag == "Xdmf"
     with pytest.raises(ValueError, match="unknown export format"):
         export(results, "vtk")
+
+
+def _pmpm(cwd, *args):
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "pmpm", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return [line.removeprefix("wrote ") for line in proc.stdout.splitlines() if line.startswith("wrote ")]
+
+
+def test_cli_export_folders_and_outdir(results, tmp_path):
+    run_dir = os.path.dirname(results)
+    written = _pmpm(tmp_path, "export", results)  # default format vtu, into <stem>_vtu/
+    assert {os.path.dirname(p) for p in written} == {os.path.join(run_dir, "res_vtu")}
+    assert sorted(os.listdir(run_dir)) == ["res.h5", "res_vtu"]
+    written = _pmpm(tmp_path, "export", results, "--format", "xdmf", "-o", "side")
+    assert written == [os.path.join("side", "res.xdmf")] and os.path.isfile(tmp_path / "side" / "res.xdmf")
+    written = _pmpm(tmp_path, "export", results, "--format", "vtu", "-o", "vtu_here")
+    assert {os.path.dirname(p) for p in written} == {"vtu_here"} and len(written) == len(TIMES) + 1
