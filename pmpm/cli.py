@@ -116,7 +116,7 @@ def _tool(args):
         from pmpm.benchmarks.cli import main as bench_main
         return bench_main(args)
     from pmpm.log import setup_logging
-    setup_logging(0)
+    setup_logging(0, quiet=True)  # the tool prints what it wrote itself, one line a file
     files = args.files if args.command == "plot" else [args.file]
     problem = _check_results(files)
     if problem:
