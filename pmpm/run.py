@@ -8,7 +8,9 @@ every rank with a message, writes a checkpoint of its last good state and exits 
 import json
 import logging
 import os
+import sys
 import time
+import types
 
 import numpy as np
 
@@ -300,3 +302,16 @@ def _next_multiple(t, interval, eps, include_now):
 
 def _checkpoint_base(path):
     return path[:-3] if path.endswith(".h5") else path
+
+
+class _CallableModule(types.ModuleType):
+    """``pmpm.run(scene, overrides=...)`` is the Python API (:func:`pmpm.api.run`), and
+    ``pmpm.run`` is also this module: importing a submodule binds its name on the package, so
+    the name cannot be a plain function. The module is made callable instead."""
+
+    def __call__(self, *args, **kwargs):
+        from pmpm.api import run
+        return run(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -98,7 +98,7 @@ MODES = ("mpio", "gather")
 # Names of the components of known fields, stored as the ``components`` attribute
 COMPONENT_NAMES = {
     "x": ("x", "y"),
-    "x0": ("x", "y"),
+    "x0": ("x0", "y0"),
     "v": ("vx", "vy"),
     "stress": ("sxx", "syy", "sxy", "szz"),
     "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz"),
