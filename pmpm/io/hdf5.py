@@ -357,6 +357,7 @@ class OutputFile:
         """Create the series group ``group``: one resizable 1-D dataset per column."""
         grp = self.file.create_group(group)
         grp.attrs["kind"] = "series"
+        grp.attrs["columns"] = _strings(columns)  # HDF5 lists members by name; this keeps the order
         for column, (units, description) in columns.items():
             dset = grp.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,),
                                       fillvalue=np.nan)
@@ -744,11 +745,14 @@ def read_series(h5, group):
     Returns
     -------
     dict of str to numpy.ndarray, shape (E,)
-        Columns in file order (``time`` among them).
+        Columns in the order they were declared (``time`` among them).
     """
     f, close = _opened(h5)
     try:
-        return {n: d[()] for n, d in f[group].items()}
+        grp = f[group]
+        order = [c.decode() if isinstance(c, bytes) else str(c) for c in grp.attrs.get("columns", [])]
+        names = [c for c in order if c in grp] + [c for c in grp if c not in order]
+        return {n: grp[n][()] for n in names}
     finally:
         if close:
             f.close()

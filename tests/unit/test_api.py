@@ -1,0 +1,110 @@
+"""The Python API (pmpm.run, pmpm.load_results): the examples of docs/api.md, run as written,
+and the properties they rest on checked against theory and the results file.
+
+The bar of cases/bar.toml (closed form in its header) runs for short end times, a few seconds
+each once the kernels are compiled.
+"""
+import os
+import re
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import pmpm
+from pmpm.errors import ConfigError
+
+REPO = Path(__file__).resolve().parents[2]
+DOC = REPO / "docs" / "api.md"
+
+
+@pytest.fixture
+def in_copy(tmp_path, monkeypatch):
+    """A working folder with cases/bar.toml, as the docs' examples expect (the repo's root)."""
+    (tmp_path / "cases").mkdir()
+    shutil.copy(REPO / "cases" / "bar.toml", tmp_path / "cases")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_the_examples_of_docs_api_md_run(in_copy):
+    blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(), flags=re.S)
+    assert len(blocks) >= 5
+    namespace = {}
+    for k, block in enumerate(blocks):
+        exec(compile(block, f"docs/api.md, python block {k + 1}", "exec"), namespace)
+    assert os.path.isfile(in_copy / "bar_api" / "bar.h5")
+
+
+def test_in_memory_and_written_results_agree(in_copy):
+    """write=False keeps what write=True writes: the same histories, energies and frames."""
+    over = {"solver.end_time": 1.0, "output.directory": "out"}
+    mem = pmpm.run("cases/bar.toml", overrides=over, dataframes=False)
+    disk = pmpm.run("cases/bar.toml", overrides=over, write=True, dataframes=False)
+    assert mem.path is None and disk.path == os.path.join("out", "bar.h5")
+    assert mem.track_ids == disk.track_ids
+    for track in ("middle", "free_end"):
+        np.testing.assert_array_equal(mem.histories[track], disk.histories[track])
+    np.testing.assert_array_equal(mem.energies, disk.energies)
+    np.testing.assert_array_equal(mem.frame_times, disk.frame_times)
+    assert sorted(mem.frames) == sorted(disk.frames)
+    for name in mem.frames:
+        np.testing.assert_array_equal(mem.frames[name], disk.frames[name])
+    with h5py.File(disk.path, "r") as f:
+        # the id the file stores for a track is the particle whose x0 is nearest the point
+        x0 = f["frames/x"][0]
+        tip = np.argmin(np.sum((x0 - [25.0, 0.25]) ** 2, axis=1))
+        assert f["history/free_end"].attrs["particle_id"] == tip == mem.track_ids["free_end"]
+        assert list(f["history/free_end"].attrs["units"][:2]) == ["m", "m"]
+        assert f["energies/strain_energy"].attrs["units"] == "J"
+        assert "ENGINEERING" in f["frames/strain"].attrs["description"]
+
+
+def test_frames_are_ordered_by_id(in_copy):
+    """Row i of a frame is particle i: the tracked particle's row holds the position and stress
+    its history recorded at the same instants (the first and the last frame are also history rows)."""
+    res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.5}, dataframes=False)
+    assert (res.frames["id"] == np.arange(res.frames["id"].shape[1])).all()
+    for track, pid in res.track_ids.items():
+        h = res.histories[track]
+        for frame, row in ((0, 0), (-1, -1)):
+            assert res.frame_times[frame] == h["time"][row]
+            np.testing.assert_array_equal(res.frames["x"][frame, pid], [h["x"][row], h["y"][row]])
+            np.testing.assert_array_equal(res.frames["stress"][frame, pid, :3],
+                                          [h["sxx"][row], h["syy"][row], h["sxy"][row]])
+        last = res.frame(-1)
+        assert last["id"][pid] == pid and last["sxx"][pid] == h["sxx"][-1]
+
+
+def test_overrides_match_a_variant(in_copy):
+    """An override and a [variants.*] entry with the same dotted key give the same run."""
+    text = (in_copy / "cases" / "bar.toml").read_text()
+    (in_copy / "cases" / "bar_v.toml").write_text(text + '\n[variants.stiff]\n"materials.bar.E" = 400.0\n')
+    over = {"solver.end_time": 0.5}
+    by_variant = pmpm.run("cases/bar_v.toml", overrides=over, variant="stiff", dataframes=False)
+    by_override = pmpm.run("cases/bar.toml", overrides={**over, "materials.bar.E": 400.0}, dataframes=False)
+    np.testing.assert_array_equal(by_variant.histories["free_end"], by_override.histories["free_end"])
+    every = pmpm.run("cases/bar_v.toml", overrides=over, dataframes=False)
+    assert list(every) == ["stiff"] and every["stiff"].scene.variant == "stiff"
+
+
+def test_bad_input(in_copy):
+    with pytest.raises(ConfigError, match="overrides.bodies.7.lower"):
+        pmpm.run("cases/bar.toml", overrides={"bodies.7.lower": [0, 0]})
+    with pytest.raises(ConfigError, match="no variant 'x'"):
+        pmpm.run("cases/bar.toml", variant="x")
+    scene = pmpm.load_scene("cases/bar.toml")[0]
+    with pytest.raises(TypeError, match="overrides need"):
+        pmpm.run(scene, overrides={"solver.cfl": 0.3})
+    with pytest.raises(ValueError, match="not a pmpm results file"):
+        with h5py.File(in_copy / "x.h5", "w") as f:
+            f["a"] = 1
+        pmpm.load_results(in_copy / "x.h5")
+
+
+def test_pandas_tables_when_installed(in_copy):
+    pandas = pytest.importorskip("pandas", reason="pandas is optional; without it tables are numpy")
+    res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.5})
+    assert isinstance(res.energies, pandas.DataFrame) and isinstance(res.frame(-1), pandas.DataFrame)
