@@ -249,7 +249,7 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
     ax.set_aspect("equal")
     ax.set_xlabel(_axis("x", "m"))
     ax.set_ylabel(_axis("y", "m"))
-    ax.set_title(f"t = {time:.6g}, displacements x {scale:g}")
+    ax.set_title(f"t = {time:.6g} s, displacements x {scale:g}")
     fig.colorbar(points, ax=ax, label=_axis(label, units))
     os.makedirs(os.path.dirname(os.path.abspath(out_png)), exist_ok=True)
     fig.savefig(out_png, dpi=130)
