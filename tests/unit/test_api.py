@@ -60,6 +60,18 @@ def test_in_memory_and_written_results_agree(in_copy):
         assert list(f["history/free_end"].attrs["units"][:2]) == ["m", "m"]
         assert f["energies/strain_energy"].attrs["units"] == "J"
         assert "ENGINEERING" in f["frames/strain"].attrs["description"]
+        # every dataset of a real run's file, views included, names a known SI unit
+        units = {}
+
+        def collect(name, obj):  # returns None: visititems stops at the first other value
+            if isinstance(obj, h5py.Dataset):
+                units[name] = obj.attrs.get("units")
+
+        f.visititems(collect)
+        flat = {name: [u] if isinstance(u, str) else list(u) for name, u in units.items() if u is not None}
+        assert sorted(set(units) - set(flat)) == []
+        assert not [name for name, us in flat.items() if "unknown" in us]
+        assert units["frames/stress"] == "Pa" and units["views/frame_00000/sxx"] == "Pa"
 
 
 def test_frames_are_ordered_by_id(in_copy):
