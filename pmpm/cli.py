@@ -136,6 +136,9 @@ def _tool(args):
             written = export(args.file, args.format, args.outdir)
     except OSError as exc:  # an unwritable folder, a read-only results file (xdmf adds /views)
         return _fail(f"{exc.filename or files[0]}: {exc.strerror or exc}", EXIT_BAD_INPUT)
+    except (ValueError, KeyError) as exc:  # a results file without what the tool needs (positions)
+        text = str(exc).strip("'\"")
+        return _fail(text if text.startswith(files[0]) else f"{files[0]}: {text}", EXIT_BAD_INPUT)
     for path in written:
         print(f"wrote {path}")
     return 0

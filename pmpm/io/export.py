@@ -63,12 +63,12 @@ def _write_pvd(path, entries):
 def _export_vtu(h5_path, outdir):
     """Write one VTU per complete frame and the PVD series; return their paths."""
     stem = os.path.splitext(os.path.basename(h5_path))[0]
-    os.makedirs(outdir, exist_ok=True)
     paths, entries = [], []
     with h5py.File(h5_path, "r") as f:
         frames = f["frames"]
-        if "x" not in frames:
+        if "x" not in frames:  # checked before anything is written
             raise ValueError(f"{h5_path} has no /frames/x to use as particle positions")
+        os.makedirs(outdir, exist_ok=True)
         for index, time in enumerate(frames["time"][()]):
             if not np.isfinite(time):
                 continue  # cut short by a crash
@@ -111,6 +111,9 @@ def export(h5_path, fmt="vtu", outdir=None):
         paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
     elif fmt == "xdmf":
         target_dir = os.fspath(outdir) if outdir else folder
+        with h5py.File(h5_path, "r") as f:
+            if "frames/x" not in f:  # checked before the folder is made
+                raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
         os.makedirs(target_dir or ".", exist_ok=True)
         target = os.path.join(target_dir, os.path.basename(stem) + ".xdmf")
         paths = [write_xdmf(h5_path, target)]

@@ -8,6 +8,7 @@ placed, still before any kernel runs, so every case takes about a second.
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 BASE_TOML = """\
@@ -209,6 +210,12 @@ def not_results(tmp_path):
     (tmp_path / "notes.h5").write_text("not hdf5\n")
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["data"] = [1.0, 2.0]
+    # a pmpm results file without positions: nothing to draw or export
+    from mpi4py import MPI
+
+    from pmpm.io import OutputFile
+    with OutputFile(tmp_path / "nox.h5", MPI.COMM_SELF, {}, 2, {"m": ((), "f8")}, [], [], ["time"]) as out:
+        out.write_frame(0.0, 0, {"id": np.arange(2), "m": np.ones(2)})
     return tmp_path
 
 
@@ -220,6 +227,8 @@ def not_results(tmp_path):
     (["export", "other.h5", "--format", "xdmf"], "other.h5: not a pmpm results file"),
     (["export", "missing.h5", "--format", "vtu"], "missing.h5: no such file"),
     (["export", "other.h5", "--format", "vtk"], "export: argument --format: invalid choice"),
+    (["export", "nox.h5"], "nox.h5 has no /frames/x"),
+    (["export", "nox.h5", "--format", "xdmf", "-o", "side"], "nox.h5 has no /frames/x"),
     (["export"], "export: the following arguments are required"),
     (["plot", "other.h5", "--outdir"], "plot: argument -o/--outdir: expected one argument"),
     (["bench", "throughput", "--particles", "0"], "bench throughput: argument --particles: must be >= 1"),
