@@ -147,26 +147,41 @@ def write_views(h5_path):
         group = f.create_group(VIEWS)
         group.attrs["description"] = ("per-frame virtual datasets (no data of their own) reading "
                                       "/frames/<field>[frame]; referenced by the XDMF sidecar")
+        # what each view needs, read once (HDF5 attribute and property reads are slow)
+        specs = [(dset.name, dset.shape, dset.dtype, dset.attrs.get("units"), view_items(name, dset))
+                 for name, dset in _frame_fields(frames)]
         for frame in complete:
             g = group.create_group(f"frame_{frame:05d}")
             g.attrs["time"] = float(times[frame])
-            for name, dset in _frame_fields(frames):
-                source = h5py.VirtualSource(".", dset.name, shape=dset.shape, dtype=dset.dtype)
-                units = dset.attrs.get("units")
-                for label, _, index in view_items(name, dset):
-                    # the whole row of each particle, or one component of it
-                    rest = (slice(None),) * (dset.ndim - 1) if index is None else (slice(None),) + index
-                    rows = dset.shape[1:] if index is None else dset.shape[1:2]
-                    layout = h5py.VirtualLayout(shape=rows, dtype=dset.dtype)
-                    layout[...] = source[(frame,) + rest]
-                    view = g.create_virtual_dataset(label, layout, fillvalue=_fill(dset.dtype))
+            for source, shape, dtype, units, items in specs:
+                for label, _, index in items:
+                    view = _virtual_view(g, label, source, shape, dtype, frame, index)
                     if units is not None:
                         view.attrs["units"] = units
     return complete
 
 
-def _fill(dtype):
-    return np.nan if np.dtype(dtype).kind == "f" else -1
+def _virtual_view(group, name, source_name, source_shape, dtype, frame, index):
+    """Create ``group/name``, a virtual dataset of ``source[frame]`` (or of one component).
+
+    Through h5py's low-level API: its high-level VirtualLayout deep-copies the source for
+    every view; with it, write_xdmf of a 101-frame, 7,700-particle file (1,111 views) took
+    12 s here, with this and the field properties read once 2.5 s (both on a loaded machine).
+    """
+    n, trailing = source_shape[1], source_shape[2:]
+    if index is None:
+        start, count, shape = (frame, 0) + (0,) * len(trailing), (1, n) + trailing, (n,) + trailing
+    else:
+        start, count, shape = (frame, 0) + tuple(index), (1, n) + (1,) * len(trailing), (n,)
+    source = h5py.h5s.create_simple(source_shape)
+    source.select_hyperslab(start, count)
+    space = h5py.h5s.create_simple(shape)
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_fill_value(np.array(np.nan if dtype.kind == "f" else -1, dtype=dtype))
+    # source file "." is the file itself: the view survives renaming or moving the file
+    dcpl.set_virtual(space, b".", source_name.encode(), source)
+    dsid = h5py.h5d.create(group.id, name.encode(), h5py.h5t.py_create(dtype), space, dcpl=dcpl)
+    return h5py.Dataset(dsid)
 
 
 def _uniform_grid(collection, h5_name, f, frame, time):
