@@ -63,13 +63,15 @@ def _progress_callback(progress):
     state = {}
 
     def show(t, end):
+        done = t >= end * (1 - 1e-9)  # the run stops within a rounding error of its end time
         if tqdm is not None:
             bar = state.get("bar") or state.setdefault("bar", tqdm(total=end, unit="s", unit_scale=True))
             bar.update(t - bar.n)
-            if t >= end:
+            if done:
                 bar.close()
+                state.pop("bar")  # the next run (variant) gets its own bar
             return
-        end_char = "\n" if t >= end else "\r"
+        end_char = "\n" if done else "\r"
         sys.stderr.write(f"pmpm: t = {t:.4g} s of {end:.4g} s ({100 * t / end:5.1f}%){end_char}")
         sys.stderr.flush()
 

@@ -120,3 +120,18 @@ def test_pandas_tables_when_installed(in_copy):
     pandas = pytest.importorskip("pandas", reason="pandas is optional; without it tables are numpy")
     res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.5})
     assert isinstance(res.energies, pandas.DataFrame) and isinstance(res.frame(-1), pandas.DataFrame)
+
+
+def test_progress_true_without_tqdm_writes_a_line(in_copy, capsys, monkeypatch):
+    import builtins
+    real_import = builtins.__import__
+
+    def no_tqdm(name, *args, **kwargs):
+        if name.startswith("tqdm"):
+            raise ImportError("no tqdm here")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_tqdm)
+    pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.5}, progress=True, dataframes=False)
+    err = capsys.readouterr().err
+    assert err.endswith("(100.0%)\n") and "of 0.5 s" in err
