@@ -15,7 +15,7 @@ and each time the time steps must be the HDF5 file's ``/frames/time`` and the na
 ``sxx`` at the last step, with its points, the HDF5 file's values (exactly: the same float64
 numbers read by the HDF5 library or written to VTU as float64). Each also renders a PNG,
 which must show more than the background.
-Runtime: about 1.5 minutes here (2 vCPUs), after the install and the kernels' compilation.
+Runtime: 45-75 s here (2 vCPUs, shared), after the install and the kernels' compilation.
 Run alone:  python -m pytest -q tests/paraview
 """
 from __future__ import annotations
@@ -99,12 +99,28 @@ def run(tmp_path_factory):
     return h5, h5.with_suffix(".xdmf"), pvd
 
 
+#: signs in pvpython's stderr that the X server, not the data, failed: once in a dozen runs
+#: here (2 vCPUs under a load of ~14) VTK aborted in vtkXOpenGLRenderWindow::CreateAWindow
+X_FAILURES = ("CreateAWindow", "XOpenDisplay", "bad X server connection", "Xvfb failed")
+ATTEMPTS = 3
+
+
 def _probe(paraview, data, array, reader=None):
-    """Run pv_probe.py under xvfb-run; return its JSON report and the PNG's path."""
+    """Run pv_probe.py under xvfb-run; return its JSON report and the PNG's path.
+
+    A run that dies while creating its X window is retried (a fresh Xvfb each time), at most
+    ATTEMPTS times; any other failure fails at once.
+    """
     pvpython, xvfb_run = paraview
-    out_json, out_png = data.parent / f"{data.stem}_{reader or 'default'}.json", data.parent / f"{data.stem}_{reader or 'default'}.png"
-    cmd = [xvfb_run, "-a", pvpython, str(PROBE), str(data), str(out_json), str(out_png), array]
-    proc = subprocess.run(cmd + ([reader] if reader else []), capture_output=True, text=True, timeout=PV_TIMEOUT)
+    stem = f"{data.stem}_{reader or 'default'}"
+    out_json, out_png = data.parent / f"{stem}.json", data.parent / f"{stem}.png"
+    cmd = [xvfb_run, "-a", "-s", "-screen 0 1280x1024x24", pvpython, str(PROBE), str(data),
+           str(out_json), str(out_png), array] + ([reader] if reader else [])
+    for attempt in range(1, ATTEMPTS + 1):
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=PV_TIMEOUT)
+        if proc.returncode == 0 or not any(sign in proc.stderr for sign in X_FAILURES):
+            break
+        print(f"attempt {attempt}: the X server failed under pvpython, retrying:\n{_tail(proc.stderr, 5)}")
     assert proc.returncode == 0 and out_json.is_file(), f"pvpython failed ({proc.returncode}):\n{_tail(proc.stderr)}"
     return json.loads(out_json.read_text()), out_png
 
