@@ -36,14 +36,21 @@ def _scenes(scene, overrides, variant):
         path, data = "<scene>", scene
     else:
         raise TypeError(f"scene must be a path, a dict of TOML data or a Scene, not {type(scene).__name__}")
+    from pmpm.errors import ConfigError
+
+    if overrides is not None and not isinstance(overrides, dict):
+        raise TypeError(f"overrides must be a dict of dotted keys, not {type(overrides).__name__}")
     variants = data.get("variants", {})
+    if not isinstance(variants, dict):
+        raise ConfigError("variants", "must be tables [variants.<name>]")
     if variant is not None and variant not in variants:
-        from pmpm.errors import ConfigError
         known = ", ".join(variants) or "none"
         raise ConfigError("variants", f"no variant {variant!r} (defined: {known})")
     names = [variant] if variant is not None else list(variants) or [""]
     scenes = []
     for name in names:
+        if name and not isinstance(variants[name], dict):
+            raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
         merged = apply_overrides(data, variants[name], f"variants.{name}") if name else data
         merged = apply_overrides(merged, overrides or {}, "overrides")
         scenes.append(dataclasses.replace(parse_scene(merged, path), variant=name))
