@@ -210,6 +210,8 @@ def not_results(tmp_path):
     (tmp_path / "notes.h5").write_text("not hdf5\n")
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["data"] = [1.0, 2.0]
+    with h5py.File(tmp_path / "old.h5", "w") as f:  # the layout before units and strain_energy
+        f.attrs["layout"] = "pmpm-results-1"
     # a pmpm results file without positions: nothing to draw or export
     from mpi4py import MPI
 
@@ -223,6 +225,7 @@ def not_results(tmp_path):
     (["plot", "notes.h5"], "notes.h5: not an HDF5 file"),
     (["plot", "other.h5"], "other.h5: not a pmpm results file"),
     (["plot", "missing.h5"], "missing.h5: no such file"),
+    (["plot", "old.h5"], "old.h5: results layout 'pmpm-results-1', this pmpm reads 'pmpm-results-2'"),
     (["export", "notes.h5"], "notes.h5: not an HDF5 file"),
     (["export", "other.h5", "--format", "xdmf"], "other.h5: not a pmpm results file"),
     (["export", "missing.h5", "--format", "vtu"], "missing.h5: no such file"),
