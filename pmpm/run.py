@@ -4,6 +4,9 @@
 particle fields, time histories of the tracked points, energies), an XDMF sidecar for ParaView,
 CSV histories and plots. A run that goes unstable, or whose particles leave the grid, stops on
 every rank with a message, writes a checkpoint of its last good state and exits non-zero.
+
+Calling this module, ``pmpm.run(scene, overrides=..., write=False)``, is the Python API:
+:func:`pmpm.api.run` (docs/api.md).
 """
 import json
 import logging
@@ -310,6 +313,7 @@ class _CallableModule(types.ModuleType):
     the name cannot be a plain function. The module is made callable instead."""
 
     def __call__(self, *args, **kwargs):
+        """Run a scene and return its results: :func:`pmpm.api.run` (docs/api.md)."""
         from pmpm.api import run
         return run(*args, **kwargs)
 
