@@ -281,8 +281,10 @@ class Result:
 
     def __repr__(self):
         n = len(self.frame_times)
+        e = self.energies
+        columns = list(e.columns) if hasattr(e, "columns") else list(e.dtype.names)
         return (f"Result({self.path or 'in memory'}, {n} frames, tracks {sorted(self.histories)}, "
-                f"energies {list(self.energies.dtype.names if hasattr(self.energies, 'dtype') else self.energies.columns)})")
+                f"energies {columns})")
 
 
 def _history_tables(times, tracks, columns, pandas):
@@ -297,7 +299,8 @@ def _from_memory(r, dataframes):
 
     pandas = _use_pandas(dataframes)
     times = np.array(r.history_t, dtype=float)
-    rows = np.array(r.history_rows, dtype=float).reshape(len(times), len(r.tracker.names), len(HISTORY_COLUMNS))
+    shape = (len(times), len(r.tracker.names), len(HISTORY_COLUMNS))
+    rows = np.array(r.history_rows, dtype=float).reshape(shape)
     tracks = {name: rows[:, k, :] for k, name in enumerate(r.tracker.names)}
     energy = np.array(r.energy_rows, dtype=float).reshape(len(times), len(ENERGY_COLUMNS))
     energies = _table({c: energy[:, k] for k, c in enumerate(ENERGY_COLUMNS)}, pandas)
