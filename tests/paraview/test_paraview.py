@@ -48,6 +48,14 @@ def _tail(text, lines=30):
     return "\n".join((text or "").rstrip().splitlines()[-lines:])
 
 
+def _apt(args, env):
+    """apt-get ARGS; a timeout is a failed run (returncode 124), not an exception."""
+    try:
+        return subprocess.run(["apt-get", *args], capture_output=True, text=True, timeout=INSTALL_TIMEOUT, env=env)
+    except subprocess.TimeoutExpired:
+        return subprocess.CompletedProcess(args, 124, "", f"apt-get {args[0]} timed out after {INSTALL_TIMEOUT} s")
+
+
 @pytest.fixture(scope="module")
 def paraview():
     """Paths of pvpython and xvfb-run, installing Debian's packages when they are missing."""
@@ -57,13 +65,10 @@ def paraview():
         if not _which("apt-get"):
             pytest.skip("pvpython or xvfb-run missing and no apt-get to install them")
         env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-        proc = subprocess.run(["apt-get", "install", "-y", *PACKAGES], capture_output=True, text=True,
-                              timeout=INSTALL_TIMEOUT, env=env)
-        if proc.returncode != 0:
-            update = subprocess.run(["apt-get", "update"], capture_output=True, text=True,
-                                    timeout=INSTALL_TIMEOUT, env=env)
-            proc = subprocess.run(["apt-get", "install", "-y", *PACKAGES], capture_output=True,
-                                  text=True, timeout=INSTALL_TIMEOUT, env=env) if update.returncode == 0 else update
+        proc = _apt(["install", "-y", *PACKAGES], env)
+        if proc.returncode != 0:  # a stale package list: refresh it once
+            update = _apt(["update"], env)
+            proc = _apt(["install", "-y", *PACKAGES], env) if update.returncode == 0 else update
         if proc.returncode != 0 or not (_which("pvpython") and _which("xvfb-run")):
             pytest.skip(f"could not install {' '.join(PACKAGES)}: {_tail(proc.stderr, 3)}")
     return _which("pvpython"), _which("xvfb-run")
