@@ -209,6 +209,8 @@ def main(argv=None):
     if len(argv) == 1 and argv[0] in SUBCOMMANDS[1:] and os.path.isfile(argv[0]):
         return _fail(f"{argv[0]!r} is a subcommand; to run the file of that name: pmpm ./{argv[0]}",
                      EXIT_BAD_INPUT)
+    if len(argv) == 1 and argv[0] in ("version", "help") and not os.path.exists(argv[0]):
+        return _fail(f"{argv[0]}: no such scene file (did you mean pmpm --{argv[0]}?)", EXIT_BAD_INPUT)
     args = build_parser().parse_args(_with_command(argv))
     if args.command == "run":
         return run_case(args)

@@ -239,6 +239,7 @@ def not_results(tmp_path):
     (["bench", "nope"], "bench: argument bench: invalid choice"),
     (["case.toml", "--variant"], "run: argument --variant: expected one argument"),
     ([], "no scene file or subcommand given"),
+    (["version"], "version: no such scene file (did you mean pmpm --version?)"),
 ])
 def test_bad_tool_arguments(not_results, args, expected):
     before = sorted(p.name for p in not_results.iterdir())
