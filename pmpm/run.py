@@ -290,9 +290,11 @@ class Run:
         if self.output is not None:
             self.output.close()
             self.output = None
-            if self.rank == 0:
+            if self.rank == 0 and "x" in self.scene.output.fields:
                 from pmpm.io import write_xdmf
                 write_xdmf(self.path)
+            elif self.rank == 0:
+                logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")
 
 
 def _next_multiple(t, interval, eps, include_now):
