@@ -135,3 +135,9 @@ def test_progress_true_without_tqdm_writes_a_line(in_copy, capsys, monkeypatch):
     pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.5}, progress=True, dataframes=False)
     err = capsys.readouterr().err
     assert err.endswith("(100.0%)\n") and "of 0.5 s" in err
+
+
+def test_a_run_without_positions_writes_no_sidecar(in_copy):
+    res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.2, "output.fields": ["stress"],
+                                                "output.directory": "nox"}, write=True, dataframes=False)
+    assert sorted(os.listdir(in_copy / "nox")) == ["bar.h5"] and sorted(res.frames) == ["id", "stress"]
