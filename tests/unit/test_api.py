@@ -141,3 +141,33 @@ def test_a_run_without_positions_writes_no_sidecar(in_copy):
     res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 0.2, "output.fields": ["stress"],
                                                 "output.directory": "nox"}, write=True, dataframes=False)
     assert sorted(os.listdir(in_copy / "nox")) == ["bar.h5"] and sorted(res.frames) == ["id", "stress"]
+
+
+def test_progress_true_uses_tqdm_when_installed(in_copy, monkeypatch):
+    """With tqdm importable (here a recording stand-in for tqdm.auto.tqdm), progress=True feeds
+    one bar per run with simulated seconds up to the end time, then closes it."""
+    import sys
+    import types
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total, **kwargs):
+            self.total, self.n, self.closed = total, 0.0, False
+            bars.append(self)
+
+        def update(self, k):
+            self.n += k
+
+        def close(self):
+            self.closed = True
+
+    auto = types.ModuleType("tqdm.auto")
+    auto.tqdm = Bar
+    monkeypatch.setitem(sys.modules, "tqdm", types.ModuleType("tqdm"))
+    monkeypatch.setitem(sys.modules, "tqdm.auto", auto)
+    text = (in_copy / "cases" / "bar.toml").read_text()
+    (in_copy / "cases" / "two.toml").write_text(text + "\n[variants.a]\n[variants.b]\n")
+    pmpm.run("cases/two.toml", overrides={"solver.end_time": 0.5}, progress=True, dataframes=False)
+    assert len(bars) == 2 and all(b.closed and b.total == 0.5 for b in bars)
+    assert all(b.n == pytest.approx(0.5, rel=1e-9) for b in bars)  # rounding of the summed updates
