@@ -171,3 +171,25 @@ def test_progress_true_uses_tqdm_when_installed(in_copy, monkeypatch):
     pmpm.run("cases/two.toml", overrides={"solver.end_time": 0.5}, progress=True, dataframes=False)
     assert len(bars) == 2 and all(b.closed and b.total == 0.5 for b in bars)
     assert all(b.n == pytest.approx(0.5, rel=1e-9) for b in bars)  # rounding of the summed updates
+
+
+def test_tables_go_through_pandas_when_importable(in_copy, monkeypatch):
+    """A stand-in pandas (pandas itself is optional and absent here): every table is built by
+    pandas.DataFrame from the same columns the numpy tables hold."""
+    import sys
+    import types
+
+    class DataFrame(dict):
+        pass
+
+    fake = types.ModuleType("pandas")
+    fake.DataFrame = DataFrame
+    monkeypatch.setitem(sys.modules, "pandas", fake)
+    over = {"solver.end_time": 0.2}
+    res = pmpm.run("cases/bar.toml", overrides=over)
+    ref = pmpm.run("cases/bar.toml", overrides=over, dataframes=False)
+    assert isinstance(res.energies, DataFrame) and isinstance(res.histories["middle"], DataFrame)
+    assert list(res.energies) == list(ref.energies.dtype.names)
+    np.testing.assert_array_equal(res.energies["strain_energy"], ref.energies["strain_energy"])
+    frame = res.frame(-1)
+    assert isinstance(frame, DataFrame) and list(frame) == list(ref.frame(-1).dtype.names)
