@@ -228,22 +228,26 @@ class Result:
     frame_times : numpy.ndarray, shape (F,)
     frames : dict of str to numpy.ndarray, shape (F, n_total, ...)
         Frame fields, row ``i`` the particle with id ``i`` (NaN or -1 where removed).
-    sections : table or None
-        The ``/sections`` series when the file has one.
+    sections, reactions : dict of str to table
+        The structural tables of the run's ``[[output.section]]`` cuts (``time``,
+        ``N``, ``V``, ``M``) and reactions (``time``, ``Rx``, ``Ry``, ``M``), by name;
+        empty when the scene asks for none (docs/structural_results.md).
     series : dict of str to table
-        Every series group of the file other than energies (e.g. ``reactions``).
+        Every series group (:meth:`pmpm.io.OutputFile.add_series`) other than energies.
 
     A *table* is a pandas DataFrame when pandas is installed (and ``dataframes`` was
     not False), else a numpy structured array; both index by column name.
     """
 
     def __init__(self, histories, track_ids, energies, frame_times, frames, series=None,
-                 path=None, scene=None, summary=None, pandas=None):
+                 path=None, scene=None, summary=None, pandas=None, structural=None):
         self.histories, self.track_ids, self.energies = histories, track_ids, energies
         self.frame_times = frame_times
         self._frames = frames
         self.series = series or {}
-        self.sections = self.series.get("sections")
+        structural = structural or {}
+        self.sections = {n: _table(t, pandas) for n, t in structural.get("sections", {}).items()}
+        self.reactions = {n: _table(t, pandas) for n, t in structural.get("reactions", {}).items()}
         self.path, self.scene, self.summary = path, scene, summary
         self._pandas = pandas
 
@@ -308,8 +312,13 @@ def _from_memory(r, dataframes):
     names = list(r.frames[0][2]) if r.frames else []
     frames = {n: np.stack([f[n] for _, _, f in r.frames]) for n in names}
     ids = {name: int(i) for name, i in zip(r.tracker.names, r.tracker.ids)}
+    structural = {"sections": {}, "reactions": {}}
+    if getattr(r, "structural", None) is not None:  # rows kept in memory without output
+        for group, columns in r.structural.drain().items():
+            kind, name = group.split("/", 1)
+            structural.setdefault(kind, {})[name] = columns
     return Result(_history_tables(times, tracks, list(HISTORY_COLUMNS), pandas), ids, energies,
-                  frame_times, frames, pandas=pandas)
+                  frame_times, frames, pandas=pandas, structural=structural)
 
 
 def load_results(path, dataframes=None):
@@ -352,5 +361,10 @@ def load_results(path, dataframes=None):
 
     series = {g: _table(read_series(path, g), pandas) for g in groups}
     energies = series.pop("energies")
+    from pmpm.results.post import read_tables
+    from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS
+    order = {"sections": SECTION_COLUMNS, "reactions": REACTION_COLUMNS}  # HDF5 lists by name
+    structural = {kind: {n: {c: t[c] for c in order[kind] if c in t} for n, t in tables.items()}
+                  for kind, tables in read_tables(path).items()}
     return Result(_history_tables(times, tracks, columns, pandas), ids, energies, frame_times[complete],
-                  frames, series=series, path=path, pandas=pandas)
+                  frames, series=series, path=path, pandas=pandas, structural=structural)

@@ -193,3 +193,26 @@ def test_tables_go_through_pandas_when_importable(in_copy, monkeypatch):
     np.testing.assert_array_equal(res.energies["strain_energy"], ref.energies["strain_energy"])
     frame = res.frame(-1)
     assert isinstance(frame, DataFrame) and list(frame) == list(ref.frame(-1).dtype.names)
+
+
+def test_sections_and_reactions_in_memory_and_from_the_file(in_copy):
+    """A scene's section cut and reactions (pmpm/results) reach the Result, the same in memory as
+    read back from the file; the fixed end's reaction balances the bar's axial force there."""
+    text = (in_copy / "cases" / "bar.toml").read_text()
+    text = text.replace('fields = ["x", "v", "stress", "strain"]',
+                        'fields = ["x", "v", "stress", "strain"]\nreactions = true')
+    text = text.replace('name = "fixed end"', 'name = "fixed_end"')  # reactions name files
+    text += '\n[[output.section]]\nname = "middle"\nsegment = [[12.5, 0.0], [12.5, 0.5]]\n'
+    (in_copy / "cases" / "cut.toml").write_text(text)
+    over = {"solver.end_time": 0.5, "output.directory": "cut"}
+    mem = pmpm.run("cases/cut.toml", overrides=over, dataframes=False)
+    disk = pmpm.run("cases/cut.toml", overrides=over, write=True, dataframes=False)
+    assert list(mem.sections) == ["middle"] and list(disk.sections) == ["middle"]
+    assert list(mem.reactions) == list(disk.reactions) and len(mem.reactions) == 1
+    for kind in ("sections", "reactions"):
+        for name, table in getattr(mem, kind).items():
+            other = getattr(disk, kind)[name]
+            assert table.dtype.names == other.dtype.names
+            for column in table.dtype.names:
+                np.testing.assert_array_equal(table[column], other[column])
+    assert np.ptp(mem.sections["middle"]["N"]) > 0  # the vibrating bar carries a varying axial force
