@@ -29,6 +29,8 @@ FIELDS = {
     "back_stress": ("Pa", "back stress of kinematic hardening, xx, yy, xy, zz"),
     "strain": ("1", "accumulated small strain exx, eyy, gxy; gxy is the ENGINEERING shear "
                     "strain (2 exy)"),
+    "F": ("1", "deformation gradient Fxx, Fxy, Fyx, Fyy, Fzz (identity at the start)"),
+    "vol0": ("m^3", "initial volume (vol = vol0 det F where F is kept)"),
     "eps_p": ("1", "plastic strain epxx, epyy, gpxy (gpxy engineering: 2 epxy)"),
     "eps_p_eq": ("1", "equivalent plastic strain (sum of the plastic multiplier increments)"),
     "plastic_work": ("J/m^3", "plastic work per unit volume"),
