@@ -11,6 +11,8 @@ python -m pmpm.warmup
 serial=(tests/unit tests/verification tests/integration)
 [ -d tests/hard ] && serial+=(tests/hard --ignore=tests/hard/mpi)
 [ -d tests/slurm ] && serial+=(tests/slurm)
+# the real-client tier: Debian's ParaView (installed by the test when missing, about 540 MB)
+[ -d tests/paraview ] && serial+=(tests/paraview)
 python -m pytest -q -p no:cacheprovider "${serial[@]}" "$@"
 for n in 2 3 4; do
     echo "== MPI tests on $n ranks =="

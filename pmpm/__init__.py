@@ -1,14 +1,17 @@
 """pmpm: explicit dynamic Material Point Method for elastoplastic structures, over MPI.
 
-Public API::
+Public API (docs/api.md)::
 
-    from pmpm import load_scene, Solver, Run
-    scene = load_scene("cases/bar.toml")[0]
-    Run(scene).execute()
+    import pmpm
+    res = pmpm.run("cases/bar.toml", overrides={"solver.end_time": 2.5})
+    res.histories["free_end"]["ux"]
+    pmpm.load_results("bar_results/bar.h5")
+
+and the pieces: ``load_scene``, ``Solver``, ``Run``.
 """
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "load_scene", "Solver", "Run"]
+__all__ = ["__version__", "run", "load_results", "Result", "load_scene", "Solver", "Run"]
 
 from pmpm.jitcache import use_versioned_cache as _use_versioned_cache  # noqa: E402
 
@@ -28,4 +31,12 @@ def __getattr__(name):
     if name == "Run":
         from pmpm.run import Run
         return Run
+    if name == "run":
+        # the module pmpm/run.py, made callable as pmpm.api.run (see the end of pmpm/run.py):
+        # importing it binds pmpm.run to it anyway, so the name is the same object either way
+        import pmpm.run
+        return pmpm.run
+    if name in ("load_results", "Result"):
+        from pmpm import api
+        return getattr(api, name)
     raise AttributeError(name)

@@ -1,24 +1,50 @@
-"""Command line: ``pmpm case.toml`` runs a scene; ``pmpm plot|export|bench ...`` the tools.
+"""Command line: ``pmpm case.toml`` runs a scene; ``pmpm run|plot|export|bench ...`` the tools.
 
-Bad input is one line naming the key or file and the reason, exit code 2, nothing written.
-A run that goes unstable or loses particles stops on every rank with a message, saves its last
-good state and exits with 3. Any other exception on any rank aborts every rank (no hang).
+``pmpm --help`` lists the subcommands, ``pmpm <subcommand> --help`` their options.
+``pmpm case.toml`` is short for ``pmpm run case.toml``: any first argument that is not a
+subcommand's name is a scene file (a file named like a subcommand runs as ``pmpm ./plot``).
+
+Bad input, a bad argument of any subcommand included, is one line naming the key, argument or
+file and the reason (``pmpm: error: ...``), exit code 2, nothing written. A run that goes
+unstable or loses particles stops on every rank with a message, saves its last good state and
+exits with 3. Any other exception on any rank aborts every rank (no hang).
 """
 import argparse
 import logging
+import os
 import sys
 
-__all__ = ["main"]
+from pmpm import __version__
+
+__all__ = ["main", "build_parser", "SUBCOMMANDS"]
 logger = logging.getLogger("pmpm.cli")
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 3
 _FILE_SUFFIXES = (".toml", ".msh", ".vtk", ".vtu", ".inp", ".h5", ".at2", ".csv", ".txt")
+SUBCOMMANDS = ("run", "plot", "export", "bench")
 
 
-def _run_parser():
-    p = argparse.ArgumentParser(prog="pmpm", description="Explicit MPM for elastoplastic structures "
-                                "(also: pmpm plot OUT.h5, pmpm export OUT.h5, pmpm bench ...)")
+def _rank_env():
+    """This process's MPI rank from the launcher's environment (argparse runs before MPI)."""
+    for var in ("OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"):
+        if var in os.environ:
+            return int(os.environ[var])
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with pmpm's error convention: one line on stderr (rank 0 only), exit 2."""
+
+    def error(self, message):
+        where = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(EXIT_BAD_INPUT, f"pmpm: error: {where}{message}\n" if _rank_env() == 0 else None)
+
+
+def _add_run(sub):
+    p = sub.add_parser("run", help="run a scene (the default: pmpm case.toml = pmpm run case.toml)",
+                       description="Run every variant of a scene (or one), write the HDF5 results, the "
+                       "XDMF sidecar, CSV histories and plots into the scene's output directory.")
     p.add_argument("case", help="scene file (TOML), see docs/scenes.md")
     p.add_argument("--restart", metavar="OUT.h5", help="continue from the newest checkpoint of this output")
     p.add_argument("--variant", help="run only this [variants.<name>] of the scene")
@@ -28,16 +54,31 @@ def _run_parser():
     return p
 
 
-def _tool_parser():
-    p = argparse.ArgumentParser(prog="pmpm")
-    sub = p.add_subparsers(dest="tool", required=True)
-    plot = sub.add_parser("plot", help="draw time histories and energies to PNG")
-    plot.add_argument("files", nargs="+", help="output HDF5 file(s); several are overlaid")
-    plot.add_argument("-o", "--outdir", default=None)
-    export = sub.add_parser("export", help="convert frames for other tools (meshio)")
-    export.add_argument("file")
-    export.add_argument("--format", default="vtu", choices=["vtu", "xdmf"])
-    export.add_argument("-o", "--outdir", default=None)
+def build_parser():
+    """Return the ``pmpm`` argument parser (subcommands run, plot, export, bench)."""
+    p = _Parser(prog="pmpm", description="Explicit MPM for elastoplastic structures. "
+                "`pmpm case.toml` runs a scene (short for `pmpm run case.toml`).",
+                epilog="Docs: README.md, docs/scenes.md (scene files), docs/output.md (results), "
+                "docs/api.md (Python API).")
+    p.add_argument("--version", action="version", version=f"pmpm {__version__}",
+                   help="print the version and exit")
+    sub = p.add_subparsers(dest="command", metavar="{run,plot,export,bench}", title="subcommands")
+    _add_run(sub)
+    plot = sub.add_parser("plot", help="draw time histories and energies to PNG",
+                          description="Plot the track histories and energies of results files; "
+                          "several files (e.g. the variants of one scene) are overlaid.")
+    plot.add_argument("files", nargs="+", metavar="OUT.h5", help="results file(s) written by a run")
+    plot.add_argument("-o", "--outdir", default=None,
+                      help="folder for the PNG files (default: the first file's folder)")
+    export = sub.add_parser("export", help="convert results for ParaView/meshio (VTU series, XDMF)",
+                            description="Export a results file: a VTU series with a .pvd (default) "
+                            "or the XDMF sidecar of the HDF5 file (see docs/output.md).")
+    export.add_argument("file", metavar="OUT.h5", help="results file written by a run")
+    export.add_argument("--format", default="vtu", choices=["vtu", "xdmf"],
+                        help="vtu: one .vtu per frame and a .pvd (default); xdmf: the sidecar")
+    export.add_argument("-o", "--outdir", default=None,
+                        help="output folder (default: <stem>_vtu/ beside the file for vtu, the "
+                        "file's folder for xdmf)")
     from pmpm.benchmarks.cli import add_bench_parser
     add_bench_parser(sub)
     return p
@@ -58,34 +99,48 @@ def _bad_input(exc, case, rank):
     return _fail(str(exc) if names_file else f"{case}: {exc}", EXIT_BAD_INPUT)
 
 
-def _tool(argv):
-    import os
-    args = _tool_parser().parse_args(argv)
-    if args.tool == "bench":
+def _check_results(files):
+    """Return the one-line error of the first file that is not a pmpm results file, or None."""
+    from pmpm.io.hdf5 import check_results_file
+    for f in files:
+        try:
+            check_results_file(f)
+        except ValueError as exc:
+            return f"{f}: {exc}"
+    return None
+
+
+def _tool(args):
+    """``pmpm plot|export|bench``: returns the exit code."""
+    if args.command == "bench":
         from pmpm.benchmarks.cli import main as bench_main
         return bench_main(args)
     from pmpm.log import setup_logging
-    setup_logging(0)
-    files = args.files if args.tool == "plot" else [args.file]
-    for f in files:
-        if not os.path.isfile(f):
-            return _fail(f"{f}: no such file", EXIT_BAD_INPUT)
-    outdir = args.outdir or os.path.dirname(os.path.abspath(files[0]))
-    if args.tool == "plot":
-        from pmpm.io import plot_results
-        from pmpm.results.post import structural_outputs
-        made = plot_results(files, outdir)
-        for f in files:
-            made += structural_outputs(f, outdir)
-        for path in made:
-            print(f"wrote {path}")
-    elif args.format == "vtu":
-        from pmpm.io import export
-        for path in export(args.file, "vtu", outdir):
-            print(f"wrote {path}")
-    else:
-        from pmpm.io import write_xdmf
-        print(f"wrote {write_xdmf(args.file)}")
+    setup_logging(0, quiet=True)  # the tool prints what it wrote itself, one line a file
+    files = args.files if args.command == "plot" else [args.file]
+    problem = _check_results(files)
+    if problem:
+        return _fail(problem, EXIT_BAD_INPUT)
+    if args.outdir and os.path.exists(args.outdir) and not os.path.isdir(args.outdir):
+        return _fail(f"{args.outdir}: --outdir is not a folder", EXIT_BAD_INPUT)
+    try:
+        if args.command == "plot":
+            from pmpm.io import plot_results
+            from pmpm.results.post import structural_outputs  # sections and reactions, if any
+            outdir = args.outdir or os.path.dirname(os.path.abspath(files[0]))
+            written = plot_results(files, outdir)
+            for f in files:
+                written += structural_outputs(f, outdir)
+        else:
+            from pmpm.io import export
+            written = export(args.file, args.format, args.outdir)
+    except OSError as exc:  # an unwritable folder, a read-only results file (xdmf adds /views)
+        return _fail(f"{exc.filename or files[0]}: {exc.strerror or exc}", EXIT_BAD_INPUT)
+    except (ValueError, KeyError) as exc:  # a results file without what the tool needs (positions)
+        text = str(exc).strip("'\"")
+        return _fail(text if text.startswith(files[0]) else f"{files[0]}: {text}", EXIT_BAD_INPUT)
+    for path in written:
+        print(f"wrote {path}")
     return 0
 
 
@@ -94,9 +149,8 @@ def _scenes(args):
     return load_scene(args.case, args.variant)
 
 
-def run_case(argv):
+def run_case(args):
     """``pmpm case.toml``: validate, run every variant, post-process. Returns the exit code."""
-    args = _run_parser().parse_args(argv)
     from mpi4py import MPI
     from decomposition import install_abort_hook
     from pmpm.errors import ConfigError, ParticleExitError, UnstableRunError
@@ -140,12 +194,27 @@ def run_case(argv):
     return 0
 
 
+def _with_command(argv):
+    """``argv`` with ``run`` inserted unless it starts with a subcommand or a top-level option."""
+    if argv and (argv[0] in SUBCOMMANDS or argv[0] in ("-h", "--help", "--version")):
+        return argv
+    return ["run", *argv]
+
+
 def main(argv=None):
     """Entry point of the `pmpm` console script; returns (and exits with) the exit code."""
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] in ("plot", "export", "bench"):
-        return _tool(argv)
-    return run_case(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:
+        return _fail("no scene file or subcommand given (pmpm --help lists them)", EXIT_BAD_INPUT)
+    if len(argv) == 1 and argv[0] in SUBCOMMANDS[1:] and os.path.isfile(argv[0]):
+        return _fail(f"{argv[0]!r} is a subcommand; to run the file of that name: pmpm ./{argv[0]}",
+                     EXIT_BAD_INPUT)
+    if len(argv) == 1 and argv[0] in ("version", "help") and not os.path.exists(argv[0]):
+        return _fail(f"{argv[0]}: no such scene file (did you mean pmpm --{argv[0]}?)", EXIT_BAD_INPUT)
+    args = build_parser().parse_args(_with_command(argv))
+    if args.command == "run":
+        return run_case(args)
+    return _tool(args)
 
 
 def console():

@@ -4,11 +4,16 @@
 particle fields, time histories of the tracked points, energies), an XDMF sidecar for ParaView,
 CSV histories and plots. A run that goes unstable, or whose particles leave the grid, stops on
 every rank with a message, writes a checkpoint of its last good state and exits non-zero.
+
+Calling this module, ``pmpm.run(scene, overrides=..., write=False)``, is the Python API:
+:func:`pmpm.api.run` (docs/api.md).
 """
 import json
 import logging
 import os
+import sys
 import time
+import types
 
 import numpy as np
 
@@ -21,8 +26,10 @@ from pmpm.results.recorder import UNITS, StructuralRecorder
 __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
 
-ENERGY_COLUMNS = ("time", "kinetic", "strain", "plastic_work", "internal_work", "damping_work",
+ENERGY_COLUMNS = ("time", "kinetic", "strain_energy", "plastic_work", "internal_work", "damping_work",
                   "external_work", "total")
+#: the solver's name of an energy where the file's differs (the file keeps "strain" for the field)
+_SOLVER_ENERGY = {"strain_energy": "strain"}
 
 
 def output_path(scene):
@@ -91,7 +98,8 @@ class Run:
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
-                          append=self.restarted_from is not None, truncate_after=self.restarted_from)
+                          append=self.restarted_from is not None, truncate_after=self.restarted_from,
+                          track_attrs=self.tracker.attrs())
 
     def _restore(self, path):
         from pmpm.io import read_checkpoint
@@ -139,7 +147,7 @@ class Run:
         e = self.solver.energies()
         self.history_t.append(self.solver.t)
         self.history_rows.append(self.tracker.sample())
-        self.energy_rows.append([self.solver.t] + [e[k] for k in ENERGY_COLUMNS[1:]])
+        self.energy_rows.append([self.solver.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
         if self.structural is not None:
             self.structural.sample()
         if self.initial_energy is None:
@@ -282,9 +290,11 @@ class Run:
         if self.output is not None:
             self.output.close()
             self.output = None
-            if self.rank == 0:
+            if self.rank == 0 and "x" in self.scene.output.fields:
                 from pmpm.io import write_xdmf
                 write_xdmf(self.path)
+            elif self.rank == 0:
+                logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")
 
 
 def _next_multiple(t, interval, eps, include_now):
@@ -297,3 +307,17 @@ def _next_multiple(t, interval, eps, include_now):
 
 def _checkpoint_base(path):
     return path[:-3] if path.endswith(".h5") else path
+
+
+class _CallableModule(types.ModuleType):
+    """``pmpm.run(scene, overrides=...)`` is the Python API (:func:`pmpm.api.run`), and
+    ``pmpm.run`` is also this module: importing a submodule binds its name on the package, so
+    the name cannot be a plain function. The module is made callable instead."""
+
+    def __call__(self, *args, **kwargs):
+        """Run a scene and return its results: :func:`pmpm.api.run` (docs/api.md)."""
+        from pmpm.api import run
+        return run(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -4,17 +4,33 @@ from pmpm.benchmarks.block import MATERIALS
 __all__ = ["add_bench_parser", "main"]
 
 
+def _positive(text):
+    """argparse type: an integer >= 1 (a bad value is a one-line error, exit 2)."""
+    import argparse
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {value})")
+    return value
+
+
 def add_bench_parser(sub):
     """Register ``pmpm bench throughput|scaling`` on an argparse sub-parser set."""
     b = sub.add_parser("bench", help="benchmarks (throughput, scaling)")
     bs = b.add_subparsers(dest="bench", required=True)
     t = bs.add_parser("throughput", help="particle-steps per second on one core")
-    t.add_argument("--particles", type=int, nargs="+", default=[200_000])
-    t.add_argument("--steps", type=int, default=20)
-    t.add_argument("--repeat", type=int, default=5)
-    t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"])
-    t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"])
-    t.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    t.add_argument("--particles", type=_positive, nargs="+", default=[200_000],
+                   help="particle count(s) of the block, one measurement each (default 200000)")
+    t.add_argument("--steps", type=_positive, default=20, help="steps per timed repeat (default 20)")
+    t.add_argument("--repeat", type=_positive, default=5, help="number of timed repeats (default 5)")
+    t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"],
+                   help="B-spline shape functions (default cubic)")
+    t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"],
+                   help="update scheme (default musl)")
+    t.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
+                   help="material of the block (default elastic)")
     t.add_argument("--interpolation", default="point", choices=["point", "ugimp", "cpgimp"],
                    help="point B-splines or the B-spline GIMP (cubic only)")
     t.add_argument("--track-F", dest="track_F", action="store_true",
@@ -22,15 +38,17 @@ def add_bench_parser(sub):
     t.add_argument("--phases", action="store_true",
                    help="also time every kernel call of the step (after the timed repeats)")
     e = bs.add_parser("effects", help="cost of each optional effect alone")
-    e.add_argument("--particles", type=int, default=100_000)
-    e.add_argument("--steps", type=int, default=10)
-    e.add_argument("--repeat", type=int, default=5)
+    e.add_argument("--particles", type=_positive, default=100_000, help="particles of the block (default 100000)")
+    e.add_argument("--steps", type=_positive, default=10, help="steps per timed repeat (default 10)")
+    e.add_argument("--repeat", type=_positive, default=5, help="number of timed repeats (default 5)")
     s = bs.add_parser("scaling", help="run under mpirun: compute/communication split per rank")
-    s.add_argument("--mode", choices=["strong", "weak"], default="strong")
-    s.add_argument("--particles", type=int, default=1_000_000)
-    s.add_argument("--steps", type=int, default=20)
-    s.add_argument("--repeat", type=int, default=3)
-    s.add_argument("--ppc", type=int, default=2,
+    s.add_argument("--mode", choices=["strong", "weak"], default="strong",
+                   help="strong: fixed total size; weak: --particles per rank (default strong)")
+    s.add_argument("--particles", type=_positive, default=1_000_000,
+                   help="particles in total (strong) or per rank (weak) (default 1000000)")
+    s.add_argument("--steps", type=_positive, default=20, help="steps per timed repeat (default 20)")
+    s.add_argument("--repeat", type=_positive, default=3, help="number of timed repeats (default 3)")
+    s.add_argument("--ppc", type=_positive, default=2,
                    help="particles per cell per direction (more particles on the same grid)")
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))

@@ -1,9 +1,16 @@
 """Export a results file to other formats: VTU series (meshio) or the XDMF sidecar.
 
-``fmt="vtu"`` writes one ``<stem>_NNNNN.vtu`` per complete frame, each holding the
-particles that exist in that frame (finite position) as ``vertex`` cells with every
-frame field as point data (plus ``id``, the particle id, when it is not a frame
-field), and a ``<stem>.pvd`` collection that ParaView opens as a time series.
+``fmt="vtu"`` writes, into ``<stem>_vtu/`` beside the file (or ``outdir``), one
+``<stem>_NNNNN.vtu`` per complete frame, each holding the particles that exist in that
+frame (finite position) as ``vertex`` cells with every frame field as point data (plus
+``id``, the particle id, when it is not a frame field), and a ``<stem>.pvd`` collection
+that ParaView opens as a time series.  Point data are named as in the XDMF sidecar:
+scalars and 2-vectors (``x``, ``v``) by the field, other fields one array per named
+component (``sxx syy sxy szz``, ``exx eyy gxy``), since VTU files written by meshio
+cannot name the components of one array.
+
+``fmt="xdmf"`` writes ``<stem>.xdmf`` into the file's folder (or ``outdir``), see
+:mod:`pmpm.io.xdmf`.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 
-from pmpm.io.xdmf import write_xdmf
+from pmpm.io.xdmf import view_items, write_xdmf
 
 __all__ = ["export", "FORMATS"]
 
@@ -36,7 +43,9 @@ def _frame_mesh(frames, index):
     data = {"id": alive.astype(np.int64)}
     for name, dset in frames.items():
         if name not in ("time", "step") and dset.ndim >= 2:
-            data[name] = dset[index][alive]
+            rows = dset[index][alive]
+            for label, _, component in view_items(name, dset):
+                data[label] = rows if component is None else rows[(slice(None),) + component]
     cells = [("vertex", np.arange(len(alive), dtype=np.int64)[:, None])]
     return meshio.Mesh(points, cells, point_data=data)
 
@@ -54,12 +63,12 @@ def _write_pvd(path, entries):
 def _export_vtu(h5_path, outdir):
     """Write one VTU per complete frame and the PVD series; return their paths."""
     stem = os.path.splitext(os.path.basename(h5_path))[0]
-    os.makedirs(outdir, exist_ok=True)
     paths, entries = [], []
     with h5py.File(h5_path, "r") as f:
         frames = f["frames"]
-        if "x" not in frames:
+        if "x" not in frames:  # checked before anything is written
             raise ValueError(f"{h5_path} has no /frames/x to use as particle positions")
+        os.makedirs(outdir, exist_ok=True)
         for index, time in enumerate(frames["time"][()]):
             if not np.isfinite(time):
                 continue  # cut short by a crash
@@ -102,6 +111,9 @@ def export(h5_path, fmt="vtu", outdir=None):
         paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
     elif fmt == "xdmf":
         target_dir = os.fspath(outdir) if outdir else folder
+        with h5py.File(h5_path, "r") as f:
+            if "frames/x" not in f:  # checked before the folder is made
+                raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
         os.makedirs(target_dir or ".", exist_ok=True)
         target = os.path.join(target_dir, os.path.basename(stem) + ".xdmf")
         paths = [write_xdmf(h5_path, target)]

@@ -4,9 +4,13 @@ Layout
 ------
 Root attributes
     ``scene`` (the resolved scene as a JSON string), ``pmpm_version``, ``n_total``,
-    ``io_mode``, ``layout`` (``"pmpm-results-1"``), ``restart_times`` (after
-    restarts) and every other attribute handed to :class:`OutputFile` (dicts and
-    lists of non-numbers as JSON strings).
+    ``io_mode``, ``layout`` (``"pmpm-results-2"``), ``units`` (``"SI"``),
+    ``restart_times`` (after restarts) and every other attribute handed to
+    :class:`OutputFile` (dicts and lists of non-numbers as JSON strings).
+Every dataset
+    carries ``units`` (an SI string, ``"1"`` for dimensionless; for a table of
+    columns one string per column) and ``description`` attributes, from
+    :mod:`pmpm.io.schema`.
 ``/frames/time`` (F,) float64, ``/frames/step`` (F,) int64
     Time and step of each frame.  A frame whose ``time`` is NaN was cut short by a
     crash (its fields are undefined); reopening with ``append=True`` drops it.
@@ -19,10 +23,23 @@ Root attributes
     ``0 .. n_total-1``: the explicit Polyvertex connectivity for the XDMF sidecar.
 ``/history/time`` (S,), ``/history/<track>`` (S, ncols) float64
     Time histories of tracked points; each track's ``columns`` attribute names
-    its columns (also stored on ``/history``).
+    its columns (also stored on ``/history``), ``units`` gives one unit per
+    column, and the caller's track attributes (pmpm's runs: ``particle_id``, the
+    id of the particle the track follows, and ``point``, the requested point).
 ``/energies/<column>`` (E,) float64
     Energy balance rows; ``time`` is always one of the columns.  As for frames, the
     time of history and energy rows is written last, so NaN marks a cut-short row.
+    ``strain_energy`` is the stored elastic energy (J), unrelated to the strain
+    field ``/frames/strain``.
+Series groups
+    ``/energies`` is one *series group*: a group (attribute ``kind = "series"``)
+    of equal-length 1-D datasets, one of them ``time``.  :meth:`OutputFile.add_series`
+    adds another (e.g. ``/reactions``) with its units in one call, and
+    :meth:`OutputFile.write_series` appends rows to it; restarts truncate them all.
+``/views/frame_NNNNN/<name>``
+    Added after the run by :func:`pmpm.io.xdmf.write_views`: virtual datasets
+    (no data of their own) of one frame of one field or component, for the XDMF
+    sidecar (see :mod:`pmpm.io.xdmf`).
 
 Parallel writing
 ----------------
@@ -49,6 +66,7 @@ import os
 import h5py
 import numpy as np
 
+from pmpm.io import schema
 from pmpm.io._parallel import (
     check_all,
     fill_value,
@@ -67,23 +85,26 @@ __all__ = [
     "read_frame",
     "read_history",
     "read_energies",
+    "read_series",
     "component_names",
+    "check_results_file",
 ]
 
 logger = logging.getLogger(__name__)
 
-LAYOUT = "pmpm-results-1"
+LAYOUT = "pmpm-results-2"
 MODES = ("mpio", "gather")
 
 # Names of the components of known fields, stored as the ``components`` attribute
 COMPONENT_NAMES = {
     "x": ("x", "y"),
-    "x0": ("x", "y"),
+    "x0": ("x0", "y0"),
     "v": ("vx", "vy"),
     "stress": ("sxx", "syy", "sxy", "szz"),
     "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz"),
     "strain": ("exx", "eyy", "gxy"),
     "F": ("Fxx", "Fxy", "Fyx", "Fyy", "Fzz"),
+    "eps_p": ("epxx", "epyy", "gpxy"),
 }
 
 _TARGET_CHUNK_BYTES = 1 << 20
@@ -135,6 +156,18 @@ def _attr_value(value):
     return json_dumps(value)
 
 
+def _strings(names):
+    """Names as an HDF5 array of variable-length strings."""
+    return np.array(list(names), dtype=h5py.string_dtype())
+
+
+def _describe(dset, units, description):
+    """Store ``units`` (a string, or one per column) and ``description`` on ``dset``."""
+    dset.attrs["units"] = units if isinstance(units, str) else _strings(units)
+    if description:
+        dset.attrs["description"] = description
+
+
 def _leading_count(times, t):
     """Return how many leading entries of ``times`` are finite and ``<= t``."""
     ok = np.isfinite(times)
@@ -177,6 +210,8 @@ class OutputFile:
     truncate_after : float, optional
         With ``append``, drop frame, history and energy rows with time greater than
         this (rows cut short by a crash are always dropped).
+    track_attrs : dict of str to dict, optional
+        Extra attributes of each track's dataset, e.g. ``{"tip": {"particle_id": 12}}``.
 
     Raises
     ------
@@ -186,7 +221,7 @@ class OutputFile:
 
     def __init__(self, path, comm, attrs, n_total, frame_fields, tracks,
                  history_columns, energy_columns, mode="mpio", append=False,
-                 truncate_after=None):
+                 truncate_after=None, track_attrs=None):
         self.path = os.fspath(path)
         self.comm = comm
         self.rank, self.size = comm.Get_rank(), comm.Get_size()
@@ -197,6 +232,7 @@ class OutputFile:
         self.tracks = list(tracks)
         self.history_columns = list(history_columns)
         self.energy_columns = list(energy_columns)
+        self.track_attrs = {k: dict(v) for k, v in (track_attrs or {}).items()}
         self._check_names()
         # In gather mode only rank 0 touches the file; in mpio mode every rank does
         self._meta = self.mode == "mpio" or self.rank == 0
@@ -204,6 +240,7 @@ class OutputFile:
         self._bounds = owner_bounds(self.n_total, self.size, gather=self.mode == "gather")
         self.file = None
         self.n_frames = self.n_history = self.n_energies = 0
+        self.series_columns = {"energies": self.energy_columns}
         attrs = comm.bcast(dict(attrs) if self.rank == 0 else None)
         exists = comm.bcast(os.path.exists(self.path) if self.rank == 0 else None)
         if append and not exists:
@@ -276,22 +313,29 @@ class OutputFile:
         self._write_root_attrs(attrs)
         f = self.file
         frames = f.create_group("frames")
-        frames.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
-        frames.create_dataset("step", (0,), "i8", maxshape=(None,), chunks=(1024,), fillvalue=-1)
+        _describe(frames.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,),
+                                        fillvalue=np.nan), *schema.meta(schema.FIELDS, "time"))
+        _describe(frames.create_dataset("step", (0,), "i8", maxshape=(None,), chunks=(1024,),
+                                        fillvalue=-1), *schema.meta(schema.FIELDS, "step"))
         for name, (trailing, dtype) in self.frame_specs.items():
             self._create_frame_dataset(frames, name, trailing, dtype)
         self._write_vertices(f)
         hist = f.create_group("history")
-        hist.attrs["columns"] = np.array(self.history_columns, dtype=h5py.string_dtype())
-        hist.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
+        hist.attrs["columns"] = _strings(self.history_columns)
+        _describe(hist.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,),
+                                      fillvalue=np.nan), *schema.meta(schema.HISTORY, "time"))
         ncols = len(self.history_columns)
+        units = [schema.meta(schema.HISTORY, c)[0] for c in self.history_columns]
         for track in self.tracks:
             dset = hist.create_dataset(track, (0, ncols), "f8", maxshape=(None, ncols),
                                        chunks=(256, ncols), fillvalue=np.nan)
-            dset.attrs["columns"] = np.array(self.history_columns, dtype=h5py.string_dtype())
-        energies = f.create_group("energies")
-        for column in self.energy_columns:
-            energies.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,), fillvalue=np.nan)
+            dset.attrs["columns"] = _strings(self.history_columns)
+            _describe(dset, units, f"time history of the tracked point {track!r}, one row per "
+                      "/history/time, columns named by 'columns': " + "; ".join(
+                          f"{c} ({schema.meta(schema.HISTORY, c)[1] or '?'})" for c in self.history_columns))
+            for key, value in self.track_attrs.get(track, {}).items():
+                dset.attrs[key] = _attr_value(value)
+        self._create_series("energies", {c: schema.meta(schema.ENERGIES, c) for c in self.energy_columns})
         f.flush()
         logger.info("created %s (%s mode, %d particles)", self.path, self.mode, self.n_total)
 
@@ -306,11 +350,92 @@ class OutputFile:
             fillvalue=fill_value(dtype), fill_time="never")
         comps = component_names(name, trailing)
         if comps:
-            dset.attrs["components"] = np.array(comps, dtype=h5py.string_dtype())
+            dset.attrs["components"] = _strings(comps)
+        _describe(dset, *schema.meta(schema.FIELDS, name))
+
+    def _create_series(self, group, columns):
+        """Create the series group ``group``: one resizable 1-D dataset per column."""
+        grp = self.file.create_group(group)
+        grp.attrs["kind"] = "series"
+        grp.attrs["columns"] = _strings(columns)  # HDF5 lists members by name; this keeps the order
+        for column, (units, description) in columns.items():
+            dset = grp.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,),
+                                      fillvalue=np.nan)
+            _describe(dset, units, description)
+
+    def add_series(self, group, columns):
+        """Add a series group (rows of named columns against time), e.g. ``/reactions``.
+
+        Collective.  On a reopened file (restart) the group must already exist with
+        these columns; then nothing is created.
+
+        Parameters
+        ----------
+        group : str
+            Group name (a new top-level group; not ``frames``, ``history``, ...).
+        columns : dict of str to str or (str, str)
+            Each column's SI units, or ``(units, description)``; must include
+            ``"time"`` (units ``"s"``).
+
+        Raises
+        ------
+        ValueError
+            For a bad name, no ``time`` column, or a reopened file whose group differs.
+        """
+        columns = {c: (v, "") if isinstance(v, str) else tuple(v) for c, v in columns.items()}
+        reserved = ("frames", "history", "topology", "views", "energies")
+        bad = [c for c in columns if not c or "/" in c]
+        if not group or "/" in group or group in reserved or bad:
+            raise ValueError(f"invalid series group {group!r} or column names {bad}")
+        if "time" not in columns:
+            raise ValueError(f"series group {group!r} needs a 'time' column")
+
+        def create():
+            if group in self.file:
+                missing = sorted(set(columns) - set(self.file[group]))
+                if missing:
+                    raise ValueError(f"{self.path}: /{group} has no columns {missing}")
+                return
+            self._create_series(group, columns)
+            self.file.flush()
+
+        self._guarded(create)
+        self.series_columns[group] = list(columns)
+
+    def write_series(self, group, row):
+        """Append one row (or several) to a series group; like :meth:`write_energies`.
+
+        Collective; the data must be identical on all ranks.
+
+        Parameters
+        ----------
+        group : str
+            A group made by :meth:`add_series` (or ``"energies"``).
+        row : dict of str to float or array_like
+            Value of each column (``"time"`` included); columns left out are NaN.
+
+        Returns
+        -------
+        int
+            Number of rows appended.
+        """
+        known = self.series_columns.get(group)
+        if known is None:
+            raise ValueError(f"no series group {group!r}; known: {sorted(self.series_columns)}")
+        unknown = sorted(set(row) - set(known))
+        if unknown:
+            raise ValueError(f"unknown {group} columns {unknown}; known: {known}")
+        given = {c: np.atleast_1d(np.asarray(v, dtype="f8")) for c, v in row.items()}
+        lengths = {len(v) for v in given.values()}
+        if len(lengths) > 1:
+            raise ValueError(f"{group} columns have different lengths: {sorted(lengths)}")
+        k = lengths.pop() if lengths else 1
+        return self._append_rows(group, {c: given.get(c, np.full(k, np.nan)) for c in known})
 
     def _write_vertices(self, f):
         """Write ``/topology/vertices`` (0..n_total-1), each rank its own block."""
         dset = f.create_dataset("topology/vertices", (self.n_total,), "i8")
+        _describe(dset, "1", "particle ids 0..n_total-1: the Polyvertex connectivity of the XDMF sidecar")
         start, stop = int(self._bounds[self.rank]), int(self._bounds[self.rank + 1])
         write_rows(dset, (), start, np.arange(start, stop, dtype=np.int64), self._driver == "mpio")
 
@@ -318,7 +443,7 @@ class OutputFile:
         """Store the scene, the version and the caller's attributes on the root."""
         merged = {"pmpm_version": _pmpm_version()}
         merged.update(attrs)
-        merged.update(layout=LAYOUT, n_total=self.n_total, io_mode=self.mode)
+        merged.update(layout=LAYOUT, n_total=self.n_total, io_mode=self.mode, units="SI")
         if "scene" in merged and not isinstance(merged["scene"], str):
             merged["scene"] = json_dumps(merged["scene"])
         for key, value in merged.items():
@@ -332,11 +457,16 @@ class OutputFile:
         self.n_frames = _leading_count(f["frames/time"][:], truncate_after)
         self.n_history = _leading_count(f["history/time"][:], truncate_after)
         self.n_energies = _leading_count(f["energies/time"][:], truncate_after)
-        for group, n in (("frames", self.n_frames), ("history", self.n_history),
-                         ("energies", self.n_energies)):
+        counts = [("frames", self.n_frames), ("history", self.n_history)]
+        # every series group (energies and any added later) is truncated by its own times
+        counts += [(name, _leading_count(grp["time"][:], truncate_after)) for name, grp in f.items()
+                   if isinstance(grp, h5py.Group) and grp.attrs.get("kind") == "series"]
+        for group, n in counts:
             for dset in f[group].values():
                 if dset.shape[0] != n:
                     dset.resize(n, axis=0)
+        if "views" in f:
+            del f["views"]  # they describe the old frames; rebuilt by write_xdmf at the end
         self._write_root_attrs(attrs)
         restarts = list(f.attrs.get("restart_times", []))
         restarts.append(np.nan if truncate_after is None else float(truncate_after))
@@ -496,16 +626,7 @@ class OutputFile:
         ValueError
             For an unknown column or columns of different lengths.
         """
-        unknown = sorted(set(row) - set(self.energy_columns))
-        if unknown:
-            raise ValueError(f"unknown energy columns {unknown}; known: {self.energy_columns}")
-        given = {c: np.atleast_1d(np.asarray(v, dtype="f8")) for c, v in row.items()}
-        lengths = {len(v) for v in given.values()}
-        if len(lengths) > 1:
-            raise ValueError(f"energy columns have different lengths: {sorted(lengths)}")
-        k = lengths.pop() if lengths else 1
-        arrays = {c: given.get(c, np.full(k, np.nan)) for c in self.energy_columns}
-        self.n_energies += self._append_rows("energies", arrays)
+        self.n_energies += self.write_series("energies", row)
 
     def flush(self):
         """Flush the file to disk (collective)."""
@@ -611,8 +732,34 @@ def read_history(h5):
             f.close()
 
 
+def read_series(h5, group):
+    """Read the columns of a series group (``"energies"``, or one added by :meth:`OutputFile.add_series`).
+
+    Parameters
+    ----------
+    h5 : str, os.PathLike or h5py.File
+        Results file.
+    group : str
+        Group name.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray, shape (E,)
+        Columns in the order they were declared (``time`` among them).
+    """
+    f, close = _opened(h5)
+    try:
+        grp = f[group]
+        order = [c.decode() if isinstance(c, bytes) else str(c) for c in grp.attrs.get("columns", [])]
+        names = [c for c in order if c in grp] + [c for c in grp if c not in order]
+        return {n: grp[n][()] for n in names}
+    finally:
+        if close:
+            f.close()
+
+
 def read_energies(h5):
-    """Read the energy columns.
+    """Read the energy columns (``time``, ``kinetic``, ``strain_energy``, ...).
 
     Parameters
     ----------
@@ -623,9 +770,36 @@ def read_energies(h5):
     -------
     dict of str to numpy.ndarray, shape (E,)
     """
-    f, close = _opened(h5)
+    return read_series(h5, "energies")
+
+
+def check_results_file(path):
+    """Raise ValueError with a one-line reason unless ``path`` is a pmpm results file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Raises
+    ------
+    ValueError
+        If the file cannot be opened as HDF5, or lacks pmpm's ``layout`` attribute
+        or the ``/frames``, ``/history`` and ``/energies`` groups.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ValueError("no such file")
     try:
-        return {n: d[()] for n, d in f["energies"].items()}
-    finally:
-        if close:
-            f.close()
+        f = h5py.File(path, "r")
+    except OSError:
+        raise ValueError("not an HDF5 file (pmpm results files are HDF5)") from None
+    with f:
+        layout = f.attrs.get("layout")
+        layout = layout.decode() if isinstance(layout, bytes) else layout
+        if not isinstance(layout, str) or not layout.startswith("pmpm-results-"):
+            raise ValueError("not a pmpm results file (no 'layout' attribute of pmpm)")
+        if layout != LAYOUT:
+            raise ValueError(f"results layout {layout!r}, this pmpm reads {LAYOUT!r} (re-run the scene)")
+        missing = [g for g in ("frames", "history", "energies") if g not in f]
+        if missing:
+            raise ValueError(f"not a complete pmpm results file (no /{missing[0]})")

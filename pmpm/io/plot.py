@@ -8,11 +8,15 @@ Energy balance error
 --------------------
 The balance is ``B = kinetic + internal_work - external_work`` when an
 ``internal_work`` column (the integrated stress power: stored strain energy plus
-dissipation) is present, else ``B = kinetic + strain + plastic_work + damping_work -
+dissipation) is present, else ``B = kinetic + strain_energy + plastic_work + damping_work -
 external_work`` (absent terms count as zero), else the ``total`` column.  The
 plotted error is ``(B - B[0]) / scale`` with ``scale`` the largest magnitude of the
 energy held by the body (kinetic + internal) or of the external work, so 0.01 means
 1 % of the energy in play.
+
+Every axis is labelled with its quantity and SI unit (read from the file's ``units``
+attributes, see :mod:`pmpm.io.schema`), and legends sit outside the axes, to the right,
+so they never cover a curve.
 """
 
 from __future__ import annotations
@@ -23,13 +27,14 @@ import os
 import h5py
 import numpy as np
 
+from pmpm.io import schema
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
 
 __all__ = ["plot_results", "plot_deformed", "energy_balance_error"]
 
 logger = logging.getLogger(__name__)
 
-STORED = ("kinetic", "strain", "plastic_work", "damping_work")
+STORED = ("kinetic", "strain_energy", "plastic_work", "damping_work")
 DISPLACEMENTS = ("ux", "uy", "uz")
 
 
@@ -44,6 +49,19 @@ def _label(path, attrs):
     """Return the legend label of a results file: its ``variant`` or its stem."""
     variant = attrs.get("variant")
     return str(variant) if variant else os.path.splitext(os.path.basename(path))[0]
+
+
+def _axis(name, units):
+    """Return an axis label ``name (units)``; dimensionless quantities show ``(-)``."""
+    if not units or units == schema.UNKNOWN:
+        return name
+    return f"{name} ({'-' if units == '1' else units})"
+
+
+def _legend(ax):
+    """Put the legend outside the axes, right of them, so it covers no curve."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small")
 
 
 def _safe(name):
@@ -90,7 +108,7 @@ def _plot_track(track, runs, outdir):
     columns = next(cols for _, _, tracks, cols in runs if track in tracks)
     # Displacements are what a history is read for; other columns only without them
     columns = [c for c in columns if c in DISPLACEMENTS] or columns
-    fig = _new_figure(figsize=(7, 2.2 * len(columns) + 0.6), layout="constrained")
+    fig = _new_figure(figsize=(8, 2.2 * len(columns) + 0.6), layout="constrained")
     axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
     for label, times, tracks, cols in runs:
         if track not in tracks:
@@ -99,11 +117,11 @@ def _plot_track(track, runs, outdir):
             if column in cols:
                 ax.plot(times, tracks[track][:, cols.index(column)], label=label)
     for ax, column in zip(axes, columns):
-        ax.set_ylabel(column)
+        ax.set_ylabel(_axis(column, schema.meta(schema.HISTORY, column)[0]))
         ax.grid(True, alpha=0.3)
     axes[0].set_title(f"history of {track}")
-    axes[0].legend(loc="best", fontsize="small")
-    axes[-1].set_xlabel("time")
+    _legend(axes[0])
+    axes[-1].set_xlabel(_axis("time", "s"))
     path = os.path.join(outdir, f"history_{_safe(track)}.png")
     fig.savefig(path, dpi=110)
     return path
@@ -112,20 +130,20 @@ def _plot_track(track, runs, outdir):
 def _plot_energies(label, energies, outdir):
     """Draw the energy columns and the balance error of one run."""
     time = energies["time"]
-    fig = _new_figure(figsize=(7, 6), layout="constrained")
+    fig = _new_figure(figsize=(8, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for name, values in energies.items():
         if name != "time":
             top.plot(time, values, label=name)
-    top.set_ylabel("energy")
+    top.set_ylabel(_axis("energy", "J"))
     top.set_title(f"energies: {label}")
-    top.legend(loc="best", fontsize="small")
+    _legend(top)
     top.grid(True, alpha=0.3)
     error = energy_balance_error(energies)
     if error is not None:
         bottom.plot(time, error, color="k")
-    bottom.set_ylabel("relative balance error")
-    bottom.set_xlabel("time")
+    bottom.set_ylabel(_axis("relative balance error", "1"))
+    bottom.set_xlabel(_axis("time", "s"))
     bottom.grid(True, alpha=0.3)
     path = os.path.join(outdir, f"energies_{_safe(label)}.png")
     fig.savefig(path, dpi=110)
@@ -181,6 +199,16 @@ def _color_values(frames, index, name):
     raise KeyError(f"no frame field or component named {name!r}; fields: {sorted(frames)}")
 
 
+def _units_of(frames, name):
+    """Return the units of a frame field or of the field a component belongs to."""
+    for field, dset in frames.items():
+        comps = [c.decode() if isinstance(c, bytes) else str(c) for c in dset.attrs.get("components", [])]
+        if field == name or name in comps:
+            units = dset.attrs.get("units", schema.meta(schema.FIELDS, field)[0])
+            return units.decode() if isinstance(units, bytes) else str(units)
+    return ""
+
+
 def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
     """Draw the particles of one frame with magnified displacements.
 
@@ -210,6 +238,7 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
         x = frames["x"][frame_index]
         x0 = frames["x0"][frame_index] if "x0" in frames else frames["x"][0]
         values, label = _color_values(frames, frame_index, color_field)
+        units = _units_of(frames, color_field)
     pos = x0 + scale * (x - x0)
     alive = np.all(np.isfinite(pos), axis=1)
     fig = _new_figure(figsize=(8, 5), layout="constrained")
@@ -218,10 +247,10 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
     points = ax.scatter(pos[alive, 0], pos[alive, 1], c=values[alive], s=size, cmap="viridis",
                         linewidths=0)
     ax.set_aspect("equal")
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
-    ax.set_title(f"t = {time:.6g}, displacements x {scale:g}")
-    fig.colorbar(points, ax=ax, label=label)
+    ax.set_xlabel(_axis("x", "m"))
+    ax.set_ylabel(_axis("y", "m"))
+    ax.set_title(f"t = {time:.6g} s, displacements x {scale:g}")
+    fig.colorbar(points, ax=ax, label=_axis(label, units))
     os.makedirs(os.path.dirname(os.path.abspath(out_png)), exist_ok=True)
     fig.savefig(out_png, dpi=130)
     return os.fspath(out_png)

@@ -5,6 +5,8 @@ import os
 import h5py
 import numpy as np
 
+from pmpm.io.hdf5 import read_history
+
 __all__ = ["write_history_csv", "postprocess"]
 logger = logging.getLogger(__name__)
 
@@ -16,12 +18,8 @@ def write_history_csv(h5_path, outdir):
         variant = f.attrs.get("variant", "")
         if "history" not in f:
             return paths
-        t = f["history/time"][:]
-        cols = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["history_columns"]]
-        for name in f["history"]:
-            if name == "time":
-                continue
-            data = f["history"][name][:]
+        t, tracks, cols = read_history(f)
+        for name, data in tracks.items():
             keep = [cols.index(c) for c in ("ux", "uy", "vx", "vy")]
             path = os.path.join(outdir, f"{name}{'_' + variant if variant else ''}.csv")
             np.savetxt(path, np.column_stack([t, data[:, keep]]), delimiter=",",
@@ -56,9 +54,8 @@ def _deformed(h5_path, spec, outdir):
     with h5py.File(h5_path, "r") as f:
         variant = f.attrs.get("variant", "")
         times = f["frames/time"][:]
-        ht = f["history/time"][:]
-        cols = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["history_columns"]]
-        u = np.abs(f["history"][spec["track"]][:, cols.index(spec["component"])])
+        ht, tracks, cols = read_history(f)
+        u = np.abs(tracks[spec["track"]][:, cols.index(spec["component"])])
         t_peak = ht[int(np.argmax(u))]
         frame = int(np.argmin(np.abs(times - t_peak)))
         color = spec["color"] if f"frames/{spec['color']}" in f else "x"

@@ -24,6 +24,7 @@ class Tracker:
 
     def __init__(self, tracks, solver):
         self.names = [t.name for t in tracks]
+        self.points = [tuple(float(c) for c in t.point) for t in tracks]
         self.solver = solver
         self.ids = np.array([self._nearest(t.point) for t in tracks], dtype=np.int64)
         self._rows_of = None
@@ -37,6 +38,12 @@ class Tracker:
             k = int(np.argmin(d))
             best = (float(d[k]), int(p["id"][k]))
         return self.solver.comm.allreduce(best, op=_min_op())[1]
+
+    def attrs(self):
+        """Attributes of each track's history dataset: the followed particle's id, the point."""
+        return {name: {"particle_id": int(pid), "point": list(point),
+                       "point_units": "m"}
+                for name, pid, point in zip(self.names, self.ids, self.points)}
 
     def sample(self):
         """(n_tracks, len(HISTORY_COLUMNS)) values, identical on every rank."""

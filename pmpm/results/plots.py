@@ -6,6 +6,7 @@ import math
 import h5py
 import numpy as np
 
+from pmpm.io.plot import _legend
 from pmpm.results.hinges import first_reached
 
 __all__ = ["plot_sections", "plot_reactions", "plot_utilisation", "plot_hinge_map", "plot_hysteresis"]
@@ -18,7 +19,7 @@ def _figure(**kwargs):
 
 
 def _panels(tables, columns, labels, path, title):
-    fig = _figure(figsize=(7, 2.2 * len(columns) + 0.6))
+    fig = _figure(figsize=(8.5, 2.2 * len(columns) + 0.6))
     axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
     for name, table in tables.items():
         for ax, c, scale in zip(axes, columns, labels):
@@ -27,7 +28,7 @@ def _panels(tables, columns, labels, path, title):
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[0].set_title(title)
-    axes[0].legend(loc="best", fontsize="small")
+    _legend(axes[0])  # outside the axes, right of them: it covers no curve
     axes[-1].set_xlabel("time (s)")
     fig.savefig(path, dpi=110)
     return path
@@ -47,7 +48,7 @@ def plot_reactions(reactions, path, label):
 
 def plot_utilisation(sections, path, label):
     """|M|/Mp and |N|/Np of the cuts with capacities; My/Mp marked."""
-    fig = _figure(figsize=(7, 5))
+    fig = _figure(figsize=(8.5, 5))
     top, bottom = fig.subplots(2, 1, sharex=True)
     for name, s in sections.items():
         a = s["attrs"]
@@ -61,7 +62,7 @@ def plot_utilisation(sections, path, label):
     bottom.set_ylabel("|N| / Np")
     bottom.set_xlabel("time (s)")
     top.set_title(f"utilisation: {label}")
-    top.legend(loc="best", fontsize="small")
+    _legend(top)
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     fig.savefig(path, dpi=110)

@@ -38,7 +38,7 @@ FRAME_FIELDS = {
 }
 TRACKS = ["tip", "base"]
 HISTORY_COLUMNS = ["ux", "uy"]
-ENERGY_COLUMNS = ["time", "kinetic", "strain", "plastic_work", "external_work", "total"]
+ENERGY_COLUMNS = ["time", "kinetic", "strain_energy", "plastic_work", "external_work", "total"]
 
 
 def everywhere(ok):
@@ -205,9 +205,54 @@ def test_history_and_energies_append(shared_dir, mode):
         assert sorted(energies) == sorted(ENERGY_COLUMNS)
         np.testing.assert_allclose(energies["kinetic"], [1, 2, 3, 4, 5])
         assert np.isnan(energies["external_work"][3:]).all()
-        return np.isnan(energies["strain"]).all()
+        return np.isnan(energies["strain_energy"]).all()
 
     assert on_root(check)
+
+
+# ------------------------------------------------------------------ series groups, units
+@pytest.mark.parametrize("mode", ["mpio", "gather"])
+def test_added_series_group_with_units_survives_a_restart(shared_dir, mode):
+    """A group like /reactions is one add_series call (collective, also on the empty rank),
+    carries its units, and is truncated on a restart like the energies."""
+    path = os.path.join(shared_dir, f"series_{mode}.h5")
+    columns = {"time": "s", "rx": ("N", "horizontal base reaction"), "ry": ("N", "vertical")}
+    with new_output(path, 4, mode) as out:
+        out.add_series("reactions", columns)
+        for i in range(3):
+            assert everywhere(out.write_series("reactions", {"time": float(i), "rx": 10.0 * i}) == 1)
+        out.write_energies({"time": 0.0, "kinetic": 1.0})
+    with new_output(path, 4, mode, append=True, truncate_after=1.0) as out:
+        out.add_series("reactions", columns)  # exists: checked, not created again
+        out.write_series("reactions", {"time": [1.5, 2.5], "rx": [1.0, 2.0], "ry": [3.0, 4.0]})
+
+    def check():
+        with h5py.File(path, "r") as f:
+            g = f["reactions"]
+            assert g.attrs["kind"] == "series"
+            assert list(g["time"][()]) == [0.0, 1.0, 1.5, 2.5]
+            assert list(g["rx"][()]) == [0.0, 10.0, 1.0, 2.0] and np.isnan(g["ry"][:2]).all()
+            assert g["rx"].attrs["units"] == "N" and g["rx"].attrs["description"] == "horizontal base reaction"
+            assert g["time"].attrs["units"] == "s"
+            # every dataset of the file says its units
+            datasets = []
+            f.visititems(lambda name, obj: datasets.append(obj) if isinstance(obj, h5py.Dataset) else None)
+            assert len(datasets) > 10  # list.append returns None: visititems saw every dataset
+            assert [d.name for d in datasets if "units" not in d.attrs] == []
+            assert f["energies/kinetic"].attrs["units"] == "J" and f["frames/stress"].attrs["units"] == "Pa"
+        return True
+
+    assert on_root(check)
+
+
+def test_add_series_refuses_bad_groups(shared_dir):
+    with new_output(os.path.join(shared_dir, "series_bad.h5"), 3) as out:
+        with pytest.raises(ValueError, match="needs a 'time' column"):
+            out.add_series("reactions", {"rx": "N"})
+        with pytest.raises(ValueError, match="invalid series group"):
+            out.add_series("frames", {"time": "s"})
+        with pytest.raises(ValueError, match="no series group"):
+            out.write_series("sections", {"time": 0.0})
 
 
 # ------------------------------------------------------------------ restart

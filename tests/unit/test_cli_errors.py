@@ -8,6 +8,7 @@ placed, still before any kernel runs, so every case takes about a second.
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 BASE_TOML = """\
@@ -157,3 +158,90 @@ def test_check_of_a_valid_scene_writes_nothing(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "valid (2 run(s))" in proc.stdout and proc.stderr == ""
     assert [p.name for p in tmp_path.iterdir()] == ["case.toml"]
+
+
+# -- command-line conventions: subcommands, --version, python -m pmpm, tool errors ---------------
+def run_pmpm(tmp_path, *args):
+    """``python -m pmpm`` (pmpm/__main__.py), the way a user without the console script runs it."""
+    return subprocess.run([sys.executable, "-m", "pmpm", *args], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_version(tmp_path):
+    import pmpm
+    proc = run_pmpm(tmp_path, "--version")
+    assert proc.returncode == 0 and proc.stdout == f"pmpm {pmpm.__version__}\n", proc
+
+
+def test_help_lists_subcommands_and_every_option_has_help():
+    import argparse
+
+    from pmpm.cli import SUBCOMMANDS, build_parser
+
+    parser = build_parser()
+    text = parser.format_help()
+    assert all(name in text for name in SUBCOMMANDS)
+
+    def walk(p, where):
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, child in action.choices.items():
+                    yield from walk(child, f"{where} {name}")
+            elif not isinstance(action, argparse._HelpAction):
+                yield where, action
+
+    missing = [f"{where} {'/'.join(a.option_strings) or a.dest}" for where, a in walk(parser, "pmpm")
+               if not a.help or a.help == argparse.SUPPRESS]
+    assert missing == []
+
+
+def test_a_file_named_like_a_subcommand_runs_with_a_path(tmp_path):
+    (tmp_path / "plot").write_text(BASE_TOML)
+    proc = run_pmpm(tmp_path, "./plot", "--check")
+    assert proc.returncode == 0 and "./plot: valid (1 run(s))" in proc.stdout, proc.stderr
+    # the bare name is the subcommand: one line saying how to run the file instead
+    assert_one_line_error(run_pmpm(tmp_path, "plot"), "pmpm ./plot")
+
+
+@pytest.fixture
+def not_results(tmp_path):
+    """Files a user might hand to plot/export by mistake: text, an HDF5 file of another program."""
+    import h5py
+    (tmp_path / "notes.h5").write_text("not hdf5\n")
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f["data"] = [1.0, 2.0]
+    with h5py.File(tmp_path / "old.h5", "w") as f:  # the layout before units and strain_energy
+        f.attrs["layout"] = "pmpm-results-1"
+    # a pmpm results file without positions: nothing to draw or export
+    from mpi4py import MPI
+
+    from pmpm.io import OutputFile
+    with OutputFile(tmp_path / "nox.h5", MPI.COMM_SELF, {}, 2, {"m": ((), "f8")}, [], [], ["time"]) as out:
+        out.write_frame(0.0, 0, {"id": np.arange(2), "m": np.ones(2)})
+    return tmp_path
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["plot", "notes.h5"], "notes.h5: not an HDF5 file"),
+    (["plot", "other.h5"], "other.h5: not a pmpm results file"),
+    (["plot", "missing.h5"], "missing.h5: no such file"),
+    (["plot", "old.h5"], "old.h5: results layout 'pmpm-results-1', this pmpm reads 'pmpm-results-2'"),
+    (["export", "notes.h5"], "notes.h5: not an HDF5 file"),
+    (["export", "other.h5", "--format", "xdmf"], "other.h5: not a pmpm results file"),
+    (["export", "missing.h5", "--format", "vtu"], "missing.h5: no such file"),
+    (["export", "other.h5", "--format", "vtk"], "export: argument --format: invalid choice"),
+    (["export", "nox.h5"], "nox.h5 has no /frames/x"),
+    (["export", "nox.h5", "--format", "xdmf", "-o", "side"], "nox.h5 has no /frames/x"),
+    (["export"], "export: the following arguments are required"),
+    (["plot", "other.h5", "--outdir"], "plot: argument -o/--outdir: expected one argument"),
+    (["bench", "throughput", "--particles", "0"], "bench throughput: argument --particles: must be >= 1"),
+    (["bench", "scaling", "--steps", "many"], "bench scaling: argument --steps: not an integer"),
+    (["bench", "nope"], "bench: argument bench: invalid choice"),
+    (["case.toml", "--variant"], "run: argument --variant: expected one argument"),
+    ([], "no scene file or subcommand given"),
+    (["version"], "version: no such scene file (did you mean pmpm --version?)"),
+])
+def test_bad_tool_arguments(not_results, args, expected):
+    before = sorted(p.name for p in not_results.iterdir())
+    assert_one_line_error(run_pmpm(not_results, *args), expected)
+    assert sorted(p.name for p in not_results.iterdir()) == before
