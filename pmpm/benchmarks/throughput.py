@@ -130,7 +130,11 @@ def throughput(args):
                "track_F": solver.keeps_F, "median_s": med,
                "particle_steps_per_s": rate, "ns_per_particle_step": 1e9 / rate,
                "cpu_particle_steps_per_s": n_real * args.steps / cpu,
-               "bytes_per_particle": mem, "bytes_moved_per_particle_step": step_bytes_per_particle(solver)}
+               "bytes_per_particle": mem,
+               # what the particle arrays hold, exactly (the RSS figure above can read low at
+               # small sizes, when the allocator reuses pages an earlier problem freed)
+               "array_bytes_per_particle": sum(a.nbytes for a in solver.particles.fields.values()) / n_real,
+               "bytes_moved_per_particle_step": step_bytes_per_particle(solver)}
         print(f"{n_real:>9d} particles  {args.steps} steps x {args.repeat}: median {med:.3f} s  "
               f"{rate / 1e6:.2f} M particle-steps/s  {1e9 / rate:.1f} ns/particle-step "
               f"(CPU time: {res['cpu_particle_steps_per_s'] / 1e6:.2f} M/s)  peak memory {mem:.0f} B/particle")

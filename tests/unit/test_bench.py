@@ -27,7 +27,15 @@ def test_throughput_prints_rates_memory_bandwidth_and_phases():
     code, text, summary = _run(["bench", "throughput", "--particles", "3000", "--steps", "2",
                                 "--repeat", "1", "--phases"])
     assert code == 0
-    assert summary["particle_steps_per_s"] > 0 and summary["bytes_per_particle"] > 0
+    assert summary["particle_steps_per_s"] > 0
+    # peak RSS growth: not asserted > 0, since at 3000 particles the allocator may serve the
+    # problem from pages an earlier test freed; the arrays themselves must hold at least the
+    # core fields (pmpm/core/particles.py CORE_FIELDS: id 8, x 16, x0 16, v 16, m 8, vol 8,
+    # stress 32, mat 4, body 4 = 112 bytes)
+    assert summary["bytes_per_particle"] >= 0
+    from pmpm.core.particles import CORE_FIELDS
+    core = sum(np.dtype(dt).itemsize * int(np.prod(shape)) for shape, dt in CORE_FIELDS.values())
+    assert summary["array_bytes_per_particle"] >= core
     assert 0 < summary["fraction_of_bandwidth_floor"] < 1
     phases = summary["phases_ns"]
     for name in ("p2g", "g2p_velocity", "g2p_kinematics", "update_stress", "other"):
