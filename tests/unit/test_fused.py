@@ -54,7 +54,7 @@ def test_fused_elastic_pass_matches_the_reference_kernels(with_strain):
     # reference: the unfused phases
     x, vol, stress = start["x"].copy(), start["vol"].copy(), start["stress"].copy()
     de = np.empty((p.n, 3))
-    work_ref = K.g2p_kinematics(x, p["m"], vol, strain_ref, de, None, K.REMAP, s._dx, dt,
+    work_ref = K.g2p_kinematics(x, p["m"], vol, strain_ref, de, None, None, None, None, K.REMAP, s._dx, dt,
                                 None, None, None, None, *geo)
     power_ref = 0.5 * K.stress_power(stress, de, vol)
     _update_elastic(stress, de, mat.params, mat.plane_strain, p["mat"], -1)
@@ -80,7 +80,7 @@ def test_fused_generic_pass_leaves_the_stress_to_the_material():
     geo = s._geometry()
     x, vol = start["x"].copy(), start["vol"].copy()
     de_ref = np.empty((p.n, 3))
-    K.g2p_kinematics(x, p["m"], vol, None, de_ref, None, K.REMAP, s._dx, dt, None, None, None, None, *geo)
+    K.g2p_kinematics(x, p["m"], vol, None, de_ref, None, None, None, None, K.REMAP, s._dx, dt, None, None, None, None, *geo)
     power_ref = 0.5 * K.stress_power(start["stress"], de_ref, vol)
     de = np.empty((p.n, 3))
     _, power = kinematics_stress(p["x"], p["m"], p["vol"], None, p["stress"], de, K.REMAP, s._dx, dt,

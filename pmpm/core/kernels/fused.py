@@ -17,7 +17,7 @@ increment of pmpm/physics/materials/linear_elastic.py and transfer.move.
 import numba as nb
 
 from pmpm.core.kernels.transfer import _block_weights, _buffers, move, strain_increment
-from pmpm.core.shape import BLOCK
+from pmpm.core.shape import BLOCK, stencil
 from pmpm.physics.materials.linear_elastic import elastic_increment
 
 __all__ = ["kinematics_stress"]
@@ -51,7 +51,7 @@ def kinematics_stress(x, m, vol, strain, stress, de, vel_field, dx, dt, elastic,
     """
     work = 0.0
     power = 0.0
-    K = len(shape)
+    K = stencil(shape)
     S, I0, J0, WX, WY = _buffers(shape)
     n = x.shape[0]
     c = dt * inv_h
@@ -82,7 +82,7 @@ def kinematics_stress(x, m, vol, strain, stress, de, vel_field, dx, dt, elastic,
             deyy = c * lyy
             dgxy = c * (lxy + lyx)
             if de is not None:
-                strain_increment(p, c, lxx, lxy, lyx, lyy, de, None, strain, vol)
+                strain_increment(p, c, lxx, lxy, lyx, lyy, de, None, strain, vol, None, None, None)
             else:
                 if strain is not None:
                     strain[p, 0] += dexx
