@@ -20,7 +20,8 @@ Two problems, each run in-process on one rank (``Solver(scene, MPI.COMM_SELF)``)
   the finest cell size of the sweep).
 
 The sweep varies the shape function (linear, quadratic, cubic B-spline), particles per cell per
-axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL); CFL 0.5 throughout.
+axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL) at CFL 0.5; then the CFL
+number alone (0.3 ... 0.9 and the largest stable, by bisection: pmpm/benchmarks/accuracy_cfl.py).
 The bar is a full factorial (it is cheap). The frame is not (the finest runs take many minutes
 each): every shape at every cell size with 2 x 2 particles and MUSL; the full factorial over
 particles per cell and scheme at 0.05 m; particles per cell and scheme varied one at a time at
@@ -87,6 +88,8 @@ FRAME_SAMPLE = 5e-5        # s between samples of the joint displacement
 FRAME_CELLS = (0.1, 0.05, 0.025, 0.0125)
 FRAME_CELLS_QUICK = (0.1, 0.05, 0.025)
 REFERENCE = {"shape": "cubic", "ppc": 2, "scheme": "musl"}   # at the finest cell size
+#: the CFL number of the main sweep (the frame's runs set it explicitly: the case's own may differ)
+STUDY_CFL = 0.5
 
 #: orders: fit over this many of the finest cell sizes (two halvings)
 ORDER_POINTS = 3
@@ -130,11 +133,13 @@ def _timed_steps(solver, end, sample):
     return wall, cpu
 
 
-def run_bar(cells, shape, scheme, ppc, v0=BAR_V0):
+def run_bar(cells, shape, scheme, ppc, v0=BAR_V0, cfl=0.5):
     """One bar run: error (max over the run of |u - u_exact| / amplitude) and its cost."""
     from mpi4py import MPI
     from pmpm.core.solver import Solver
     scene = bar_scene(cells, shape, scheme, ppc, v0)
+    if cfl != 0.5:   # replace(), not the scene parser: the bisection tries CFL numbers above 1
+        scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, cfl=float(cfl)))
     s = Solver(scene, MPI.COMM_SELF)
     amp = v0 / BAR_OMEGA
     worst = [0.0]
@@ -148,11 +153,20 @@ def run_bar(cells, shape, scheme, ppc, v0=BAR_V0):
     wall, cpu = _timed_steps(s, scene.solver.end_time, sample)
     return {"problem": "bar", "shape": shape, "ppc": ppc, "scheme": scheme, "cell_size": BAR_L / cells,
             "particles": int(s.n_total), "steps": int(s.step_count), "wall_s": wall, "cpu_s": cpu,
-            "error": worst[0], "status": "ok"}
+            "error": worst[0], "status": "ok", "cfl": cfl, "energy_drift": energy_drift(s)}
 
 
-def frame_scene(cell_size, shape="cubic", scheme="musl", ppc=2, t_end=FRAME_T_END, case=FRAME_CASE):
-    """The elastic portal frame regridded with ``cell_size`` over the case's domain."""
+def energy_drift(solver):
+    """|total energy - (initial energy + external work)| relative to the energies in play (the
+    measure of the solver's divergence check, pmpm/core/solver.py check_energy)."""
+    e = solver.energies()
+    scale = abs(solver.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
+    return abs(e["total"] - solver.initial_energy - e["external_work"]) / scale if scale > 0 else 0.0
+
+
+def frame_scene(cell_size, shape="cubic", scheme="musl", ppc=2, t_end=FRAME_T_END, case=FRAME_CASE, cfl=None):
+    """The elastic portal frame regridded with ``cell_size`` over the case's domain (``cfl``:
+    the CFL number, default the case's)."""
     from pmpm.scene.config import load_scene
     scene = load_scene(case, "elastic")[0]
     (x0, y0), (x1, y1) = FRAME_DOMAIN
@@ -161,7 +175,8 @@ def frame_scene(cell_size, shape="cubic", scheme="musl", ppc=2, t_end=FRAME_T_EN
         if not math.isclose(lo + n * cell_size, hi, abs_tol=1e-9):
             raise ValueError(f"cell size {cell_size} does not divide the frame's domain [{lo}, {hi}]")
     grid = dataclasses.replace(scene.grid, origin=(x0, y0), cell_size=float(cell_size), cells=cells)
-    solver = dataclasses.replace(scene.solver, shape_function=shape, scheme=scheme, end_time=float(t_end))
+    solver = dataclasses.replace(scene.solver, shape_function=shape, scheme=scheme, end_time=float(t_end),
+                                 cfl=float(scene.solver.cfl if cfl is None else cfl))
     bodies = tuple(dataclasses.replace(b, particles_per_cell=ppc) for b in scene.bodies)
     output = dataclasses.replace(scene.output, checkpoint_interval=None)
     return dataclasses.replace(scene, grid=grid, solver=solver, bodies=bodies, output=output)
@@ -179,12 +194,12 @@ def _first_peak(t, u):
     return float(u[i]), float(t[i])
 
 
-def run_frame(cell_size, shape, scheme, ppc, t_end=FRAME_T_END):
+def run_frame(cell_size, shape, scheme, ppc, t_end=FRAME_T_END, cfl=STUDY_CFL):
     """One frame run: the first peak of the joint panel's mean ux and its cost."""
     from mpi4py import MPI
     from pmpm.core.solver import Solver
     from pmpm.io.tracking import Tracker
-    scene = frame_scene(cell_size, shape, scheme, ppc, t_end)
+    scene = frame_scene(cell_size, shape, scheme, ppc, t_end, cfl=cfl)
     s = Solver(scene, MPI.COMM_SELF)
     box = scene.loads.forces[0]
     p = s.particles
@@ -215,7 +230,7 @@ def run_frame(cell_size, shape, scheme, ppc, t_end=FRAME_T_END):
     return {"problem": "frame", "shape": shape, "ppc": ppc, "scheme": scheme, "cell_size": cell_size,
             "particles": int(s.n_total), "steps": int(s.step_count), "wall_s": wall, "cpu_s": cpu,
             "peak_mm": peak * 1e3, "t_peak_s": t_peak, "peak_track_mm": float(ut.max()) * 1e3,
-            "status": status}
+            "status": status, "cfl": cfl, "energy_drift": energy_drift(s)}
 
 
 def warm_up(combos, log):
@@ -481,17 +496,28 @@ def write_markdown(rows, summary, path):
         lines += ["", f"## Cheapest setting per error target (frame, first peak, by {clock})", "",
                   "A setting counts when it and every finer run of the same shape, ppc and scheme (at least "
                   "one, the reference excluded) meet the target.", "",
-                  "| target | shape | ppc | scheme | cell (m) | error | wall (s) | CPU (s) |",
-                  "|---|---|---|---|---|---|---|---|"]
+                  "CFL: the largest number of the CFL sweep at which that setting still meets the target "
+                  "(at most 0.9 of the largest stable one), with the error and the cost (scaled by the step "
+                  "count) at it; 0.5 (the main sweep's) where the shape and cell size were not swept.", "",
+                  "| target | shape | ppc | scheme | cell (m) | CFL | error | wall (s) | CPU (s) |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        from pmpm.benchmarks.accuracy_cfl import cfl_recommendation
+        cfl = summary.get("cfl")
         groups = [("any", summary["recommendations"])] + list(summary.get("recommendations_by_shape", {}).items())
         for label, recs in groups:
             for key, r in recs.items():
                 head = f"{float(key):.1%}" + ("" if label == "any" else f" ({label} only)")
                 if r is None:
-                    lines.append(f"| {head} | none qualifies | | | | | | |")
-                else:
-                    lines.append(f"| {head} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:g} "
-                                 f"| {r['error']:.3%} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} |")
+                    lines.append(f"| {head} | none qualifies | | | | | | | |")
+                    continue
+                if cfl:
+                    r = cfl_recommendation(r, cfl["rows"], cfl["largest_stable"], float(key))
+                c = f"{r.get('cfl', 0.5):g}" + ("" if r.get("swept") or not cfl else " (not swept)")
+                lines.append(f"| {head} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:g} "
+                             f"| {c} | {r['error']:.3%} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} |")
+    if summary.get("cfl"):
+        from pmpm.benchmarks.accuracy_cfl import cfl_markdown
+        lines += [""] + cfl_markdown(summary["cfl"]["rows"], summary["cfl"]["largest_stable"])
     if summary.get("reference"):
         ref = summary["reference"]
         lines += ["", f"Frame reference: {ref['shape']}, {ref['ppc']} x {ref['ppc']} particles per cell, "
@@ -510,6 +536,8 @@ def write_plot(rows, path, clock="wall_s"):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     problems = [p for p in ("bar", "frame") if any(r["problem"] == p and r.get("error") for r in rows)]
+    if not problems:   # (--cfl-only: the main sweep's plot has nothing to show)
+        return
     fig, axes = plt.subplots(1, len(problems), figsize=(6.5 * len(problems), 5.2), squeeze=False)
     colors = {"linear": "tab:blue", "quadratic": "tab:orange", "cubic": "tab:green"}
     markers = {"musl": "o", "usl": "s", "usf": "^"}
@@ -565,6 +593,9 @@ def add_arguments(p):
     p.add_argument("--outdir", default="accuracy_results", help="directory for accuracy.csv/.md/.png")
     p.add_argument("--from-csv", metavar="CSV", default=None,
                    help="run nothing: redo the analysis and the files from an earlier accuracy.csv")
+    p.add_argument("--no-cfl", action="store_true", help="skip the CFL-number sweep (pmpm/benchmarks/accuracy_cfl.py)")
+    p.add_argument("--cfl-only", action="store_true",
+                   help="run only the frame's reference and the CFL-number sweep")
     p.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                    help="time axis of the analysis: wall (default) or CPU time of the stepping")
 
@@ -591,16 +622,27 @@ def read_csv(path):
 
 
 def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None, from_csv=None,
-          clock="wall_s"):
-    """Run the sweep, write the files, print the figures; returns the summary dict (the JSON)."""
+          clock="wall_s", cfl=True, cfl_only=False):
+    """Run the sweep (and, ``cfl``, the CFL-number sweep; ``cfl_only``: the frame's reference
+    and the CFL sweep alone), write the files, print the figures; returns the summary dict (the JSON)."""
+    from pmpm.benchmarks import accuracy_cfl
     t_study = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
     csv_path = os.path.join(outdir, "accuracy.csv")
+    cfl_rows = best = None
     if from_csv:
         rows = read_csv(from_csv)
     else:
-        rows = _sweep(plan(quick), csv_path, log)
-    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command, clock)
+        runs = plan(quick)
+        if cfl_only:
+            runs = [r for r in runs if r[0] == "frame" and r[1:4] == tuple(REFERENCE.values())
+                    and r[4] == min(q[4] for q in runs if q[0] == "frame")]
+            warm_up({(p, shape, "musl") for p, shape, _ in accuracy_cfl.cfl_plan(quick)}, log)
+        rows = _sweep(runs, csv_path, log)
+        if cfl or cfl_only:
+            cfl_rows, best = accuracy_cfl.run_cfl_sweep(quick, log)
+    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command, clock,
+                   cfl_rows=cfl_rows, best=best)
 
 
 def _sweep(runs, csv_path, log):
@@ -630,7 +672,8 @@ def _sweep(runs, csv_path, log):
     return rows
 
 
-def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s"):
+def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s", cfl_rows=None, best=None):
+    from pmpm.benchmarks import accuracy_cfl
     ref = attach_frame_errors(rows)
     pareto_front(rows, clock)
     orders = convergence_orders(rows, "bar")
@@ -649,6 +692,19 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s"
         "reference_self_error": reference_self_error(rows, ref),
         "files": {k: os.path.join(outdir, f"accuracy.{k}") for k in ("csv", "md", "png")},
     }
+    if cfl_rows is not None:
+        accuracy_cfl.attach_cfl_errors(cfl_rows, ref["peak_mm"] if ref else None)
+        summary["cfl"] = {"largest_stable": best, "rows": cfl_rows,
+                          "recommendations": {k: (None if r is None else accuracy_cfl.cfl_recommendation(
+                              r, cfl_rows, best, float(k))) for k, r in summary["recommendations"].items()}}
+        cfl_csv = os.path.join(outdir, "accuracy_cfl.csv")
+        with open(cfl_csv, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=CSV_COLUMNS + ("cfl", "energy_drift", "dt_effect", "stable", "bisection"),
+                               extrasaction="ignore")
+            w.writeheader()
+            for r in cfl_rows:
+                w.writerow({k: v for k, v in r.items() if v is not None})
+        summary["files"]["cfl_csv"] = cfl_csv
     write_csv(rows, csv_path)
     write_markdown(rows, summary, summary["files"]["md"])
     write_plot(rows, summary["files"]["png"], clock)
@@ -675,6 +731,16 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s"
             print(f"{float(key):.1%} on the frame's first peak: {r['shape']}, {r['ppc']}x{r['ppc']} ppc, "
                   f"{r['scheme'].upper()}, h = {r['cell_size']:g} m ({r['error']:.3%}, wall {r['wall_s']:.1f} s, "
                   f"CPU {r['cpu_s']:.1f} s)", file=out)
+    if summary.get("cfl"):
+        for problem, shapes in summary["cfl"]["largest_stable"].items():
+            print(f"largest stable CFL number ({problem}): "
+                  + ", ".join(f"{k} {v:g}" for k, v in shapes.items()), file=out)
+        for key, r in summary["cfl"]["recommendations"].items():
+            if r is not None:
+                print(f"{float(key):.1%} on the frame's first peak with the time step: {r['shape']}, "
+                      f"h = {r['cell_size']:g} m, CFL {r['cfl']:g}"
+                      + (f" ({r['error']:.3%}, wall about {r['wall_s']:.1f} s)" if r["swept"] else
+                         " (this shape and cell size not in the CFL sweep)"), file=out)
     took = "" if summary["study_wall_s"] is None else f"study wall time {summary['study_wall_s']:.0f} s; "
     print(f"{took}wrote {', '.join(summary['files'].values())}", file=out)
     print(json.dumps(_jsonable(summary), separators=(",", ":")), file=out)
@@ -703,5 +769,6 @@ def accuracy(args):
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:
         command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()
-    study(args.quick, args.outdir, command=command, from_csv=args.from_csv, clock=args.clock + "_s")
+    study(args.quick, args.outdir, command=command, from_csv=args.from_csv, clock=args.clock + "_s",
+          cfl=not args.no_cfl, cfl_only=args.cfl_only)
     return 0

@@ -50,6 +50,15 @@ def add_bench_parser(sub):
     s.add_argument("--repeat", type=_positive, default=3, help="number of timed repeats (default 3)")
     s.add_argument("--ppc", type=_positive, default=2,
                    help="particles per cell per direction (more particles on the same grid)")
+    pe = bs.add_parser("peer", help="pmpm's cubic MUSL step side by side with a JIT peer (Taichi)")
+    pe.add_argument("--particles", type=int, nargs="+", default=[200_000, 1_000_000])
+    pe.add_argument("--steps", type=int, default=10)
+    pe.add_argument("--repeat", type=int, default=7)
+    fc = bs.add_parser("fixedcost", help="per-step fixed cost: small scenes against a large one")
+    fc.add_argument("--particles", type=int, nargs="+", default=[2_000, 7_700, 8_000, 200_000])
+    fc.add_argument("--repeat", type=int, default=7)
+    fc.add_argument("--work", type=float, default=2e6, help="particle-steps per sample")
+    fc.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 
@@ -62,6 +71,12 @@ def main(args):
     if args.bench == "accuracy":
         from pmpm.benchmarks.accuracy import accuracy
         return accuracy(args)
+    if args.bench == "fixedcost":
+        from pmpm.benchmarks.fixed_cost import fixed_cost
+        return fixed_cost(args)
+    if args.bench == "peer":
+        from pmpm.benchmarks.peer import peer
+        return peer(args)
     if args.bench == "effects":
         return effects(args)
     from pmpm.benchmarks.scaling import scaling
