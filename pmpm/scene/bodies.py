@@ -175,16 +175,13 @@ def body_points(body, grid, scene_dir, key="body"):
 
 
 def _initial_velocity(body, pts, key):
-    """Evaluate the body's velocity entries (numbers or expressions in x, y)."""
-    names = {"x": pts[:, 0], "y": pts[:, 1], "pi": math.pi, "sin": np.sin, "cos": np.cos,
-             "exp": np.exp, "sqrt": np.sqrt, "abs": np.abs}
+    """The body's velocity entries (numbers, or expressions in x, y parsed by
+    :mod:`pmpm.scene.expressions`, never run as code) at its points; non-finite refused."""
+    from pmpm.scene.expressions import parse_expression
     v = np.zeros((len(pts), 2))
     for d, entry in enumerate(body.velocity):
         if isinstance(entry, str):
-            try:
-                v[:, d] = eval(compile(entry, "<velocity>", "eval"), {"__builtins__": {}}, names)
-            except Exception as exc:
-                raise ConfigError(f"{key}.velocity", f"cannot evaluate {entry!r} ({exc})") from None
+            v[:, d] = parse_expression(entry, f"{key}.velocity").evaluate(pts[:, 0], pts[:, 1], f"{key}.velocity")
         else:
             v[:, d] = entry
     return v

@@ -13,7 +13,13 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Optional
 
+import numpy as np
+
 from pmpm.errors import ConfigError
+from pmpm.physics.materials import make_material
+from pmpm.scene.expressions import parse_expression
+from pmpm.scene.limits import check_memory, check_time_step
+from pmpm.scene.names import check_name, check_output_directory, check_output_files
 from pmpm.scene.tables import REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
 from pmpm.core.shape import GIMP_SHAPES, INTERPOLATIONS
@@ -93,6 +99,8 @@ class SolverConfig:
     max_steps: Optional[int]
     objective_rate: str = "jaumann"   # of the hypoelastic models when large_rotations is on
     interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp" (pmpm.core.shape)
+    max_estimated_steps: int = 10_000_000
+    allow_unstable_time_step: bool = False
 
 
 @dataclass(frozen=True)
@@ -171,10 +179,24 @@ class Scene:
 
 # -- sections -------------------------------------------------------------------------------
 
+#: most cells along one axis: node indices and counts stay far inside int32/int64 arithmetic
+MAX_CELLS_PER_AXIS = 2 ** 31 - 2
+
+
 def _grid(t):
     g = GridConfig(origin=t.vector("origin", (0.0, 0.0)),
                    cell_size=t.number("cell_size", low=0, low_open=True),
                    cells=t.int_vector("cells", low=3))
+    if max(g.cells) > MAX_CELLS_PER_AXIS:
+        raise ConfigError(t.path("cells"), f"at most {MAX_CELLS_PER_AXIS} cells per axis (integer range)")
+    for d in range(2):
+        upper = g.origin[d] + g.cell_size * g.cells[d]
+        if not math.isfinite(upper):
+            raise ConfigError(t.path("cells"), "the grid's extent (cells x cell_size) is not a finite number")
+        # positions must resolve the cell size: x + h must differ from x across the whole grid
+        if g.cell_size < 1e-9 * max(abs(g.origin[d]), abs(upper)):
+            raise ConfigError(t.path("cell_size"), "too small for the grid's coordinates "
+                                                   "(below 1e-9 of their magnitude)")
     t.finish()
     return g
 
@@ -184,11 +206,87 @@ def _finite(value):
 
 
 def _velocity(t, name):
+    """Two numbers or expression strings in x, y (parsed here, so --check refuses a bad one)."""
     value = t.raw(name, [0.0, 0.0])
     if (not isinstance(value, list) or len(value) != 2
             or not all(isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value)):
         raise ConfigError(t.path(name), "must be two numbers or expressions in x, y (e.g. \"0.1*sin(x)\")")
+    for v in value:
+        if isinstance(v, str):
+            parse_expression(v, t.path(name))
+        elif not math.isfinite(v):
+            raise ConfigError(t.path(name), "must be finite")
     return tuple(float(v) if not isinstance(v, str) else v for v in value)
+
+
+def _body_box(body, grid):
+    """The body's bounding box clipped to the grid box (the whole grid for a mesh)."""
+    g_lo = grid.origin
+    g_hi = tuple(o + grid.cell_size * n for o, n in zip(grid.origin, grid.cells))
+    geo = body.geometry
+    if body.shape == "rectangle":
+        lo, hi = geo["lower"], geo["upper"]
+    elif body.shape == "circle":
+        lo = tuple(c - geo["radius"] for c in geo["center"])
+        hi = tuple(c + geo["radius"] for c in geo["center"])
+    elif body.shape == "polygon":
+        xs, ys = zip(*geo["vertices"])
+        lo, hi = (min(xs), min(ys)), (max(xs), max(ys))
+    elif body.shape == "i_section":
+        r = geo["depth"] / 2
+        lo = tuple(min(a, b) - r for a, b in zip(geo["start"], geo["end"]))
+        hi = tuple(max(a, b) + r for a, b in zip(geo["start"], geo["end"]))
+    else:
+        lo, hi = g_lo, g_hi
+    lo = tuple(max(a, b) for a, b in zip(lo, g_lo))
+    hi = tuple(min(a, b) for a, b in zip(hi, g_hi))
+    return lo, tuple(max(a, b) for a, b in zip(lo, hi))
+
+
+def _check_velocity_values(bodies, grid):
+    """Refuse velocity expressions that are not finite somewhere on a lattice over the body's
+    box (41 x 41 points and the corners): catches ``x/0``, ``sqrt(-1-x)``, overflow at --check.
+    The particles' own values are checked again when they are placed."""
+    import numpy as np
+    for k, body in enumerate(bodies):
+        exprs = [v for v in body.velocity if isinstance(v, str)]
+        if not exprs:
+            continue
+        lo, hi = _body_box(body, grid)
+        X, Y = np.meshgrid(np.linspace(lo[0], hi[0], 41), np.linspace(lo[1], hi[1], 41), indexing="ij")
+        for v in exprs:
+            parse_expression(v, f"bodies[{k}].velocity").evaluate(X.ravel(), Y.ravel(), f"bodies[{k}].velocity")
+
+
+def _polygon_vertices(t):
+    """A simple polygon of positive area: no repeated vertex, no crossing edges, not collinear."""
+    import numpy as np
+    verts = t.raw("vertices")
+    if (not isinstance(verts, list) or len(verts) < 3 or len(verts) > 10000
+            or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) for c in v) for v in verts)):
+        raise ConfigError(t.path("vertices"), "must be a list of 3 to 10000 [x, y] points")
+    P = np.array(verts, dtype=float)
+    Q = np.roll(P, -1, axis=0)
+    scale = float(np.ptp(P, axis=0).max())
+    area = 0.5 * abs(np.dot(P[:, 0], Q[:, 1]) - np.dot(P[:, 1], Q[:, 0]))
+    if not scale > 0 or area <= 1e-12 * scale * scale:
+        raise ConfigError(t.path("vertices"), "the polygon has zero area (collinear or repeated points)")
+    if np.any(np.all(np.abs(P - Q) <= 1e-12 * scale, axis=1)):
+        raise ConfigError(t.path("vertices"), "two consecutive vertices coincide")
+    # proper crossings of non-adjacent edges (vectorised over all pairs)
+    def orient(a, b, c):
+        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+    n = len(P)
+    i, j = np.triu_indices(n, k=2)
+    keep = ~((i == 0) & (j == n - 1))  # the first and last edges share a vertex
+    i, j = i[keep], j[keep]
+    a, b, c, d = P[i], Q[i], P[j], Q[j]
+    crosses = (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)
+    if crosses.any():
+        raise ConfigError(t.path("vertices"), f"edges {int(i[crosses][0])} and {int(j[crosses][0])} "
+                                              f"cross (the polygon must be simple)")
+    return tuple(tuple(float(c) for c in v) for v in verts)
 
 
 def _geometry(t, shape):
@@ -198,11 +296,7 @@ def _geometry(t, shape):
         if any(u <= l for l, u in zip(geo["lower"], geo["upper"])):
             raise ConfigError(t.path("upper"), "must be above lower in both coordinates")
     elif shape == "polygon":
-        verts = t.raw("vertices")
-        if (not isinstance(verts, list) or len(verts) < 3
-                or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) for c in v) for v in verts)):
-            raise ConfigError(t.path("vertices"), "must be a list of at least 3 [x, y] points")
-        geo = {"vertices": tuple(tuple(float(c) for c in v) for v in verts)}
+        geo = {"vertices": _polygon_vertices(t)}
     elif shape == "circle":
         geo = {"center": t.vector("center"), "radius": t.number("radius", low=0, low_open=True)}
     elif shape == "i_section":
@@ -243,6 +337,10 @@ def _bodies(root, materials, ppc_default, thickness):
             thickness=t.number("thickness", thickness, low=0, low_open=True),
             velocity=_velocity(t, "velocity")))
         t.finish()
+        previous = [b.name for b in bodies[:-1]]
+        if bodies[-1].name in previous:
+            raise ConfigError(t.path("name"), f"body name {bodies[-1].name!r} is already used by "
+                                              f"bodies[{previous.index(bodies[-1].name)}]")
     return tuple(bodies)
 
 
@@ -277,15 +375,10 @@ def _boundaries(root, reactions=False):
     return tuple(out)
 
 
-#: names that become file names (sections, reactions): letters, digits, _ - . ; no leading dot
-_FILE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
-
-
 def _check_file_name(name, key):
-    """Refuse a name that cannot be used as (part of) a file name as it stands."""
-    if not name or len(name) > 64 or name.startswith(".") or not set(name) <= _FILE_NAME_CHARS:
-        raise ConfigError(key, f"{name!r} is not a valid file name (1-64 of letters, digits, "
-                               "'_', '-', '.', not starting with '.')")
+    """Refuse a name that cannot be used as (part of) a file name: the one rule of
+    pmpm.scene.names (sections, reactions, like tracks and variants)."""
+    check_name(name, key, "name")
 
 
 def _segment(t, name):
@@ -433,7 +526,9 @@ def _solver(t):
         on_particle_exit=t.string("on_particle_exit", "error", choices=("error", "remove")),
         max_steps=t.integer("max_steps", None, low=1),
         objective_rate=rate,
-        interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS))
+        interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS),
+        max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
+        allow_unstable_time_step=t.boolean("allow_unstable_time_step", False))
     if s.interpolation not in ("point",) and s.shape_function not in GIMP_SHAPES:
         raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "
                                                    f"{' or '.join(map(repr, GIMP_SHAPES))}, not {s.shape_function!r}")
@@ -441,11 +536,22 @@ def _solver(t):
     return s
 
 
+def _directory(t):
+    value = t.string("directory", None)
+    if value is None:
+        return None  # filled in by parse_scene: <stem>_results
+    if not value.strip() or "\0" in value:
+        raise ConfigError(t.path("directory"), "must be a non-empty path")
+    return value
+
+
 def _output(t, stem, end_time, state_fields=(), bodies=(), grid=None):
     t = t or Table({}, "output")
     tracks = []
     for k, tr in enumerate(t.tables("track")):
-        tracks.append(TrackConfig(name=tr.string("name", f"point{k}"), point=tr.vector("point")))
+        name = check_name(tr.string("name", f"point{k}"), tr.path("name"), "track name",
+                          also_reserved=("time",))
+        tracks.append(TrackConfig(name=name, point=tr.vector("point")))
         tr.finish()
     names = [tr.name for tr in tracks]
     if len(set(names)) != len(names):
@@ -468,7 +574,7 @@ def _output(t, stem, end_time, state_fields=(), bodies=(), grid=None):
         if deformed_plot["track"] not in names:
             raise ConfigError("output.deformed_plot.track", f"no [[output.track]] named {deformed_plot['track']!r}")
     out = OutputConfig(
-        directory=t.string("directory", f"{stem}_results"),
+        directory=_directory(t),
         interval=t.number("interval", end_time / 20, low=0, low_open=True),
         history_interval=t.number("history_interval", end_time / 1000, low=0, low_open=True),
         fields=tuple(fields), track=tuple(tracks),
@@ -534,6 +640,8 @@ def parse_scene(data, path="<scene>"):
     materials, state_fields = _materials(root, formulation)
     solver = _solver(root.table("solver"))
     stem = os.path.splitext(os.path.basename(path))[0]
+    if path != "<scene>":
+        check_name(stem, path, "scene file name (its stem names the output files)")
     out_table = root.table("output", None)
     reactions = out_table.boolean("reactions", False) if out_table is not None else False
     bodies = _bodies(root, materials, ppc, thickness)
@@ -554,7 +662,15 @@ def parse_scene(data, path="<scene>"):
     if scene.contact is not None and solver.interpolation != "point":
         raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
     _check_hysteresis(scene)
+    if scene.output.directory is None:
+        scene = dataclasses.replace(scene, output=dataclasses.replace(scene.output, directory=f"{stem}_results"))
     root.finish()
+    _check_velocity_values(scene.bodies, scene.grid)
+    built = [make_material(materials[k], f"materials.{k}", formulation) for k in materials]
+    check_time_step(scene, built)
+    # what no rank count can shrink (every rank places all points and holds a window at
+    # least the ghost columns wide); the solver checks its own rank's share before allocating
+    check_memory(scene, n_ranks=math.inf)
     return scene
 
 
@@ -594,38 +710,69 @@ def _flatten(overrides, prefix=""):
             yield f"{prefix}{key}", value
 
 
+#: largest scene file read (a scene is a few kilobytes; this refuses devices and huge files)
+MAX_SCENE_BYTES = 1 << 20
+
+
 def read_toml(path):
-    """Read a TOML file; unreadable or malformed files are a ConfigError naming the file."""
+    """Read a TOML file; unreadable, oversized, non-UTF-8 or malformed files are a ConfigError
+    naming the file (the reason never quotes the file's contents)."""
+    import stat
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            mode = os.fstat(fh.fileno()).st_mode
+            if not stat.S_ISREG(mode):
+                raise ConfigError(path, "is not a regular file")
+            raw = fh.read(MAX_SCENE_BYTES + 1)
     except OSError as exc:
-        raise ConfigError(path, f"cannot read ({exc.strerror or exc})") from None
+        raise ConfigError(path, f"cannot read ({exc.strerror or type(exc).__name__})") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise ConfigError(path, f"larger than {MAX_SCENE_BYTES // 1024} KB: not a scene file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(path, f"not UTF-8 text (byte {exc.start} cannot be decoded)") from None
+    if text.startswith("\ufeff"):
+        raise ConfigError(path, "starts with a byte-order mark (save it as UTF-8 without BOM)")
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(path, f"not valid TOML ({exc})") from None
+        where = str(exc)
+        where = where[where.rfind("(at "):] if "(at " in where else ""
+        raise ConfigError(path, f"not valid TOML {where or '(syntax error)'}".strip()) from None
+    except RecursionError:
+        raise ConfigError(path, "not valid TOML (nested too deeply)") from None
 
 
 def load_scene(path, variant=None):
     """Read and validate ``path``; with ``variant``, apply ``[variants.<variant>]`` first.
 
     Returns a list of scenes: one per variant when the scene declares variants and none is
-    chosen, else one.
+    chosen, else one. Variant names follow the file-name rule (:mod:`pmpm.scene.names`); no
+    two outputs of the runs share a file, none leaves ``output.directory``, and that directory
+    can be created (nothing is created here).
     """
     data = read_toml(path)
     variants = data.get("variants", {})
     if not variants:
         if variant:
             raise ConfigError("variants", f"scene has no variants (asked for {variant!r})")
-        return [parse_scene(data, path)]
-    if not isinstance(variants, dict):
-        raise ConfigError("variants", "must be tables [variants.<name>]")
-    names = [variant] if variant else list(variants)
-    scenes = []
-    for name in names:
-        if name not in variants:
-            raise ConfigError("variants", f"no variant {name!r} (defined: {', '.join(variants)})")
-        if not isinstance(variants[name], dict):
-            raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
-        scene = parse_scene(apply_overrides(data, variants[name], f"variants.{name}"), path)
-        scenes.append(dataclasses.replace(scene, variant=name))
+        scenes = [parse_scene(data, path)]
+    else:
+        if not isinstance(variants, dict):
+            raise ConfigError("variants", "must be tables [variants.<name>]")
+        for name in variants:
+            check_name(name, f"variants.{name}", "variant name")
+        names = [variant] if variant else list(variants)
+        scenes = []
+        for name in names:
+            if name not in variants:
+                raise ConfigError("variants", f"no variant {name!r} (defined: {', '.join(variants)})")
+            if not isinstance(variants[name], dict):
+                raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
+            scene = parse_scene(apply_overrides(data, variants[name], f"variants.{name}"), path)
+            scenes.append(dataclasses.replace(scene, variant=name))
+    for scene in scenes:
+        check_output_directory(scene.output.directory)
+    check_output_files(scenes)
     return scenes
