@@ -6,8 +6,9 @@ subcommand's name is a scene file (a file named like a subcommand runs as ``pmpm
 
 Bad input, a bad argument of any subcommand included, is one line naming the key, argument or
 file and the reason (``pmpm: error: ...``), exit code 2, nothing written. A run that goes
-unstable or loses particles stops on every rank with a message, saves its last good state and
-exits with 3. Any other exception on any rank aborts every rank (no hang).
+unstable or loses particles stops on every rank with a message, saves its last good state
+(``<stem>.lastgood.h5``) and exits with 3; a file that cannot be written (full disk) stops
+every rank with one line naming it and exit code 4. Any other exception on any rank aborts every rank (no hang).
 """
 import argparse
 import logging
@@ -21,6 +22,7 @@ logger = logging.getLogger("pmpm.cli")
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 3
+EXIT_WRITE_FAILED = 4   # an output or checkpoint file could not be written (full disk, I/O)
 _FILE_SUFFIXES = (".toml", ".msh", ".vtk", ".vtu", ".inp", ".h5", ".at2", ".csv", ".txt")
 SUBCOMMANDS = ("run", "plot", "export", "bench")
 
@@ -153,7 +155,7 @@ def run_case(args):
     """``pmpm case.toml``: validate, run every variant, post-process. Returns the exit code."""
     from mpi4py import MPI
     from decomposition import install_abort_hook
-    from pmpm.errors import ConfigError, ParticleExitError, UnstableRunError
+    from pmpm.errors import ConfigError, OutputWriteError, ParticleExitError, UnstableRunError
     from pmpm.log import setup_logging
     comm = MPI.COMM_WORLD
     rank = comm.Get_rank()
@@ -177,6 +179,8 @@ def run_case(args):
             run = Run(scene, comm, restart=args.restart)
         except ConfigError as exc:
             return _bad_input(exc, args.case, rank)
+        except OutputWriteError as exc:
+            return _fail(str(exc), EXIT_WRITE_FAILED) if rank == 0 else EXIT_WRITE_FAILED
         except (FileNotFoundError, ValueError, OSError) as exc:
             if args.restart:
                 return _fail(f"{args.restart}: cannot restart ({exc})", EXIT_BAD_INPUT) if rank == 0 else EXIT_BAD_INPUT
@@ -185,12 +189,18 @@ def run_case(args):
             summary = run.execute()
         except (UnstableRunError, ParticleExitError) as exc:
             return _fail(f"{args.case}: {exc}", EXIT_RUN_FAILED) if rank == 0 else EXIT_RUN_FAILED
+        except OutputWriteError as exc:
+            return _fail(str(exc), EXIT_WRITE_FAILED) if rank == 0 else EXIT_WRITE_FAILED
         paths.append(summary["output"])
         if rank == 0:
             logger.info("done: %d steps in %.1f s wall -> %s", summary["steps"], summary["wall"], summary["output"])
     if rank == 0 and not args.no_plots:
         from pmpm.io.post import postprocess
-        postprocess(scenes, paths)
+        try:
+            postprocess(scenes, paths)
+        except OSError as exc:  # CSV and PNG writes: rank 0 only, the run's files are complete
+            return _fail(f"{exc.filename or scenes[0].output.directory}: cannot write "
+                         f"({exc.strerror or type(exc).__name__})", EXIT_WRITE_FAILED)
     return 0
 
 

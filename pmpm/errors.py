@@ -1,6 +1,6 @@
 """Errors that pmpm reports to the user as one line and exit code 2."""
 
-__all__ = ["ConfigError", "UnstableRunError", "ParticleExitError"]
+__all__ = ["ConfigError", "UnstableRunError", "ParticleExitError", "OutputWriteError"]
 
 
 class ConfigError(Exception):
@@ -26,3 +26,23 @@ class UnstableRunError(RuntimeError):
 
 class ParticleExitError(RuntimeError):
     """Particles left the grid and the scene asked for ``on_particle_exit = "error"``."""
+
+
+class OutputWriteError(RuntimeError):
+    """An output or checkpoint file could not be written (full disk, quota, I/O error).
+
+    Raised on every rank together; the command line prints one line naming the file and
+    exits with its own code (4). The previous checkpoint is left as it was.
+
+    Parameters
+    ----------
+    path : str
+        The file being written.
+    reason : str
+        Short reason, e.g. ``No space left on device``.
+    """
+
+    def __init__(self, path, reason):
+        self.path = path
+        self.reason = reason
+        super().__init__(f"{path}: cannot write ({reason})")

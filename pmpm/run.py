@@ -10,6 +10,7 @@ Calling this module, ``pmpm.run(scene, overrides=..., write=False)``, is the Pyt
 """
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -33,9 +34,34 @@ _SOLVER_ENERGY = {"strain_energy": "strain"}
 
 
 def output_path(scene):
-    """``<output.directory>/<stem>[_<variant>].h5``."""
-    name = scene.stem + (f"_{scene.variant}" if scene.variant else "")
-    return os.path.join(scene.output.directory, name + ".h5")
+    """``<output.directory>/<stem>[_<variant>].h5`` (names checked by pmpm.scene.names)."""
+    from pmpm.scene.names import output_base
+    return output_base(scene) + ".h5"
+
+
+#: the output file and checkpoints of one run, by suffix after ``<stem>[_<variant>]``
+RUN_SUFFIXES = (".h5", ".ckpt0.h5", ".ckpt1.h5", ".lastgood.h5")
+
+
+def _owner(path):
+    """(scene file, variant) that wrote a pmpm HDF5 file, or None if unknown / not ours."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as f:
+            if "scene_file" in f.attrs:  # results file
+                return str(f.attrs["scene_file"]), str(f.attrs.get("variant", ""))
+            if "attrs" in f.attrs:        # checkpoint
+                a = json.loads(f.attrs["attrs"])
+                if "scene_file" in a:
+                    return str(a["scene_file"]), str(a.get("variant", ""))
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return None
+
+
+def _healthy_fields(fields):
+    """True if the state a checkpoint would hold is finite (position, velocity, stress, ...)."""
+    return all(np.all(np.isfinite(a)) for k, a in fields.items() if a.dtype.kind == "f")
 
 
 class _Snapshot:
@@ -62,7 +88,7 @@ class Run:
         Output file of an earlier run whose newest checkpoint to continue from.
     """
 
-    def __init__(self, scene, comm=None, write=True, restart=None, snapshot_every=50):
+    def __init__(self, scene, comm=None, write=True, restart=None):
         self.scene = scene
         from pmpm.physics.contact import ContactSolver  # scene [contact]: one velocity field per body
         self.solver = (Solver if scene.contact is None else ContactSolver)(scene, comm)
@@ -70,14 +96,20 @@ class Run:
         self.rank = self.comm.Get_rank()
         self.write = write
         self.path = output_path(scene)
-        self.snapshot_every = snapshot_every
         self.restarted_from = None
+        from pmpm.scene.fingerprint import fingerprint, scene_record
+        self.record = scene_record(scene)
+        self.fingerprint = fingerprint(self.record)
+        if write:
+            self._check_own_files()
         if restart:
             self._restore(restart)
         self.tracker = Tracker(scene.output.track, self.solver)
         s = self.solver
         self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
-        self.output = self._open_output() if write else None
+        if write and not restart:
+            self._remove_stale_checkpoints()
+        self.output = self._guard(self.path, self._open_output) if write else None
         self.history_t, self.history_rows, self.energy_rows = [], [], []
         self.initial_energy = None
 
@@ -87,6 +119,58 @@ class Run:
         names = ["id"] + [f for f in self.scene.output.fields if f in p and f != "id"]
         return {f: (p[f].shape[1:], p[f].dtype) for f in names}
 
+    def _guard(self, path, fn, *args):
+        """Run a write on every rank; if it fails anywhere (full disk, I/O error), raise
+        OutputWriteError naming ``path`` on every rank together."""
+        from pmpm.errors import OutputWriteError
+        from pmpm.io.checkpoint import _write_reason
+        error, result = None, None
+        try:
+            result = fn(*args)
+        except (UnstableRunError, ParticleExitError):
+            raise  # collective verdicts, raised on every rank together: not a write failure
+        except OutputWriteError as exc:
+            error = (exc.path, exc.reason)
+        except (OSError, RuntimeError, ValueError) as exc:  # h5py and the OS on a failed write
+            error = (path, _write_reason(exc))
+        failed = [e for e in self.comm.allgather(error) if e is not None]
+        if failed:
+            raise OutputWriteError(*failed[0])
+        return result
+
+    def _base(self):
+        return _checkpoint_base(self.path)
+
+    def _check_own_files(self):
+        """Refuse to write over the output or checkpoints of another run: a file at this run's
+        names written by another scene file or variant (same stem in the same directory)."""
+        from pmpm.errors import ConfigError
+        bad = None
+        if self.rank == 0:
+            me = (self.scene.path, self.scene.variant)
+            for suffix in RUN_SUFFIXES:
+                path = self._base() + suffix
+                if os.path.exists(path):
+                    owner = _owner(path)
+                    if owner is not None and owner != me:
+                        bad = path
+                        break
+        bad = self.comm.bcast(bad)
+        if bad:
+            raise ConfigError("output.directory", f"{bad} belongs to a run of another scene file "
+                                                  f"or variant; choose another output.directory")
+
+    def _remove_stale_checkpoints(self):
+        """A fresh run replaces this run's results file, so the checkpoints and last good state
+        of an earlier run of the same scene no longer belong to it (a later --restart would
+        continue the old run)."""
+        from pmpm.io.checkpoint import checkpoint_paths, lastgood_path
+        if self.rank == 0:
+            for path in checkpoint_paths(self._base()) + [lastgood_path(self._base())]:
+                if os.path.exists(path):
+                    os.remove(path)
+        self.comm.Barrier()
+
     def _open_output(self):
         from pmpm.io import OutputFile
         if self.rank == 0:
@@ -94,6 +178,7 @@ class Run:
         self.comm.Barrier()
         attrs = {"scene": json.dumps(self.scene.to_dict(), default=str), "pmpm_version": __version__,
                  "variant": self.scene.variant, "title": self.scene.title,
+                 "scene_file": self.scene.path, "scene_fingerprint": self.fingerprint,
                  "history_columns": list(HISTORY_COLUMNS)}
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
@@ -102,10 +187,28 @@ class Run:
                           track_attrs=self.tracker.attrs())
 
     def _restore(self, path):
+        """Continue from ``path``: a results file (its newest checkpoint) or a checkpoint file
+        itself (``<stem>.lastgood.h5``, ``<stem>.ckpt0.h5``). Refuses a checkpoint of another
+        scene (naming the first key that differs) and an inconsistent one."""
+        from pmpm.errors import ConfigError
         from pmpm.io import read_checkpoint
+        from pmpm.scene.fingerprint import first_difference
         s = self.solver
         wanted = s.particles.spec()  # what this scene's run carries (name -> shape, dtype)
-        fields, attrs = read_checkpoint(_checkpoint_base(path), self.comm)
+        explicit = path if path.endswith(".lastgood.h5") or ".ckpt" in os.path.basename(path) else None
+        try:
+            fields, attrs = read_checkpoint(_checkpoint_base(path), self.comm, path=explicit)
+        except (KeyError, TypeError, json.JSONDecodeError) as exc:
+            raise ConfigError(path, f"not a usable pmpm checkpoint ({type(exc).__name__})") from None
+        theirs = attrs.get("scene_record") if isinstance(attrs, dict) else None
+        if not isinstance(theirs, dict):
+            raise ConfigError(path, "the checkpoint records no scene (written by another program "
+                                    "or an older pmpm): cannot tell that it belongs to this scene")
+        key = first_difference(self.record, theirs)
+        if key is not None:
+            raise ConfigError(key, f"differs from the scene of the checkpoint {path} (only the "
+                                   f"keys listed in docs/scenes.md may change on restart)")
+        self._check_consistent(fields, attrs, path)
         self._complete_fields(fields, wanted, path)  # before anything is changed
         cols = np.floor((fields["x"][:, s.axis] - s.grid.origin[s.axis]) * s.grid.inv_h).astype(np.int64)
         from decomposition import alltoallv_fields
@@ -119,6 +222,44 @@ class Run:
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
 
+    def _check_consistent(self, fields, attrs, path):
+        """Refuse (on every rank) a checkpoint whose state this scene cannot continue."""
+        from pmpm.errors import ConfigError
+        from decomposition.slab import block_range
+        s = self.solver
+        reason = None
+        try:
+            t, step, dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
+            energies = [float(attrs[k]) for k in ("external_work", "internal_work", "initial_energy")]
+            n_total = int(attrs["n_total"])
+        except (KeyError, TypeError, ValueError):
+            t = step = dt = n_total = None
+            energies = []
+            reason = "lacks its time, step, time step, energies or particle count"
+        if reason is None:
+            if not (math.isfinite(t) and t >= 0):
+                reason = f"its time {t!r} is not a finite time >= 0"
+            elif t > self.scene.solver.end_time * (1 + 1e-12):
+                reason = f"its time {t:g} s is beyond solver.end_time = {self.scene.solver.end_time:g} s"
+            elif step < 0 or not (math.isfinite(dt) and dt > 0):
+                reason = "its step or time step is not valid"
+            elif not all(math.isfinite(e) for e in energies):
+                reason = "its energies are not finite"
+            elif n_total != s.n_total:
+                reason = f"it holds {n_total} particle ids, this scene {s.n_total}"
+        if reason is None:
+            ids = fields.get("id")
+            count, start = block_range(n_total, self.comm.Get_size(), self.rank)
+            if ids is None or "x" not in fields:
+                reason = "it has no particle ids or positions"
+            elif np.any((ids < start) | (ids >= start + count)) or len(np.unique(ids)) != len(ids):
+                reason = "its particle ids are duplicated or do not match their rows"
+            elif not _healthy_fields(fields):
+                reason = "it holds non-finite particle values (NaN or inf)"
+        reasons = [r for r in self.comm.allgather(reason) if r is not None]
+        if reasons:
+            raise ConfigError(path, f"cannot restart: {reasons[0]}")
+
     def _complete_fields(self, fields, wanted, path):
         """Refuse a checkpoint that lacks a field this scene's run carries (it is another
         scene's: e.g. an elastic run's, without the back stress a plastic model reads)."""
@@ -126,21 +267,28 @@ class Run:
         if missing:
             raise ValueError(f"the checkpoint has no field {missing[0]!r}, which this scene needs")
 
-    def checkpoint(self, snap=None):
-        """Write the current (or a snapshot's) state as the newest checkpoint."""
+    def checkpoint(self, snap=None, path=None):
+        """Write the current (or a snapshot's) state as the newest checkpoint, or to ``path``
+        (the last good state). The current state is health-checked first (finite, energy
+        bounded): a diverging state never becomes a regular checkpoint."""
         if not self.write:
-            return
+            return None
         from pmpm.io import write_checkpoint
         self.flush_history()  # so a restart from this checkpoint misses no history row
         s = self.solver
-        snap = snap or _Snapshot(s)
+        if snap is None:
+            s.check_health()
+            snap = _Snapshot(s)
         ext, internal, damped = self.comm.allreduce(
             np.array([snap.external_work, snap.internal_work, snap.damping_work]))
-        write_checkpoint(_checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
-                         {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
-                          "internal_work": float(internal), "damping_work": float(damped),
-                          "initial_energy": s.initial_energy,
-                          "removed": s.removed, "n_total": s.n_total})
+        return write_checkpoint(
+            _checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
+            {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
+             "internal_work": float(internal), "damping_work": float(damped),
+             "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
+             "scene_file": self.scene.path, "variant": self.scene.variant,
+             "scene_fingerprint": self.fingerprint, "scene_record": self.record},
+            path=path)
 
     # -- recording --------------------------------------------------------------------------
     def record_history(self):
@@ -170,9 +318,9 @@ class Run:
     def write_frame(self):
         if self.output:
             p = self.solver.particles
-            self.output.write_frame(self.solver.t, self.solver.step_count,
-                                    {f: p[f] for f in self._frame_fields()})
-            self.flush_history()
+            self._guard(self.path, self.output.write_frame, self.solver.t, self.solver.step_count,
+                        {f: p[f] for f in self._frame_fields()})
+            self._guard(self.path, self.flush_history)
 
     # -- the loop ---------------------------------------------------------------------------
     def _log_start(self):
@@ -224,6 +372,11 @@ class Run:
         next_ckpt = (_next_multiple(s.t, out.checkpoint_interval, eps, False)
                      if out.checkpoint_interval else np.inf)
         last_frame = self.restarted_from if self.restarted_from is not None else -np.inf
+        try:
+            s.check_health()  # the state we start from is the first last good state
+        except UnstableRunError as exc:
+            self.fail(exc, None)
+            raise
         snap = _Snapshot(s)
         wall0 = time.perf_counter()
         last_progress = wall0
@@ -238,25 +391,29 @@ class Run:
                 next_frame = _next_multiple(s.t, out.interval, eps, False)
             if s.t >= end - eps or (cfg.max_steps and s.step_count >= cfg.max_steps):
                 break
-            if s.t >= next_ckpt - eps:
-                self.checkpoint()
-                next_ckpt = _next_multiple(s.t, out.checkpoint_interval, eps, False)
-            if s.step_count % self.snapshot_every == 0:
-                snap = _Snapshot(s)
             try:
+                if s.t >= next_ckpt - eps:
+                    self._guard(self.path, self.checkpoint)
+                    next_ckpt = _next_multiple(s.t, out.checkpoint_interval, eps, False)
                 s.step()
             except (UnstableRunError, ParticleExitError) as exc:
                 self.fail(exc, snap)
                 raise
+            if s.healthy_step == s.step_count:
+                snap = _Snapshot(s)  # the newest state that passed the health checks
             now = time.perf_counter()
             if out.progress_interval and now - last_progress >= out.progress_interval:
                 last_progress = now
                 self.progress(now - wall0, t_start)
-        self.flush_history()
+        self._guard(self.path, self.flush_history)
         wall = time.perf_counter() - wall0
         self.progress(wall, t_start)
         if out.checkpoint_interval:
-            self.checkpoint()
+            try:
+                self._guard(self.path, self.checkpoint)
+            except UnstableRunError as exc:
+                self.fail(exc, snap)
+                raise
         self.close()
         summary = {"steps": s.step_count, "time": s.t, "wall": wall, "particles": s.n_total,
                    "removed": s.removed, "output": self.path if self.write else None}
@@ -276,23 +433,37 @@ class Run:
 
     def fail(self, exc, snap):
         """Every rank arrives here together (the trouble flags are allreduced each step), with
-        the same message, which the command line prints once as its error line."""
+        the same message, which the command line prints once as its error line. The newest
+        state that passed the health checks goes to ``<stem>.lastgood.h5``; the regular
+        checkpoints are left as they are."""
+        from pmpm.errors import OutputWriteError
+        from pmpm.io.checkpoint import lastgood_path
         try:
-            self.flush_history()
-            self.checkpoint(snap)
+            self._guard(self.path, self.flush_history)
+            if not self.write:
+                return
+            if snap is None:
+                if self.rank == 0:
+                    logger.error("no state passed the health checks: no last good state saved")
+                return
+            path = lastgood_path(self._base())
+            self._guard(path, self.checkpoint, snap, path)
             if self.rank == 0:
-                logger.error("last good state (t = %.6g s, step %d) saved to %s", snap.t, snap.step,
-                             _checkpoint_base(self.path) + ".ckpt*.h5" if self.write else "(no output)")
+                logger.error("last good state (t = %.6g s, step %d) saved to %s (continue with "
+                             "--restart %s)", snap.t, snap.step, path, path)
+        except OutputWriteError as write_error:
+            if self.rank == 0:
+                logger.error("%s", write_error)
         finally:
             self.close()
 
     def close(self):
         if self.output is not None:
-            self.output.close()
-            self.output = None
-            if self.rank == 0 and "x" in self.scene.output.fields:
+            output, self.output = self.output, None
+            self._guard(self.path, output.close)
+            if "x" in self.scene.output.fields:
                 from pmpm.io import write_xdmf
-                write_xdmf(self.path)
+                self._guard(self.path[:-3] + ".xdmf", lambda: write_xdmf(self.path) if self.rank == 0 else None)
             elif self.rank == 0:
                 logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")
 

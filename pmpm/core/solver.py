@@ -15,6 +15,7 @@ import math
 import time
 
 import numpy as np
+from mpi4py import MPI
 
 from decomposition import alltoallv_fields, get_comm
 from pmpm.core import kernels as K
@@ -31,6 +32,7 @@ from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argum
 from pmpm.errors import ConfigError
 from pmpm.results.reactions import Reactions
 from pmpm.results.sections import make_cuts
+from pmpm.scene.limits import check_memory, check_time_step
 
 __all__ = ["Solver", "needs_deformation_gradient"]
 logger = logging.getLogger(__name__)
@@ -86,6 +88,12 @@ class Solver:
         self.labels = list(scene.materials)
         self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
                           for k in self.labels]
+        # before anything big is allocated: this rank's share of grid window and particles
+        local = self.comm.Split_type(MPI.COMM_TYPE_SHARED) if self.comm.Get_size() > 1 else None
+        check_memory(scene, self.comm.Get_size(), local.Get_size() if local else 1,
+                     state_floats=sum(int(np.prod(f)) for m in self.materials for f in m.state_fields.values()))
+        if local is not None:
+            local.Free()
         self.scheme = make_scheme(cfg.scheme)
         self.loads = Loads(scene.loads)
         check_boundaries(scene.boundaries, self.grid)
@@ -126,7 +134,9 @@ class Solver:
         self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
+        check_time_step(scene, self.materials, self.vmax)  # positive, finite, not too many steps
         self._vmax_healthy = self.vmax
+        self.healthy_step = -1  # step count of the newest state that passed check_energy
         self.initial_energy = self.energies()["total"]
 
     # -- set-up helpers ---------------------------------------------------------------------
@@ -449,12 +459,24 @@ class Solver:
         # kinetic energy alone as well: a diverging run can turn volumes (and the internal work
         # integrated over them) negative, which hides the growth in the total
         grown = max(e["total"], e["kinetic"]) - supplied
-        if grown > ENERGY_GROWTH_LIMIT * scale and scale > 0:
+        if not math.isfinite(grown) or (grown > ENERGY_GROWTH_LIMIT * scale and scale > 0):
             raise UnstableRunError(
                 f"the run diverged at t = {self.t + dt:.6g} s (step {self.step_count + 1}): energy "
                 f"{e['total']:.4g} J exceeds the initial energy plus external work {supplied:.4g} J; "
                 f"dt = {dt:.3g} s, the stable step is about {self.critical_dt():.3g} s")
         self._vmax_healthy = self.vmax
+        self.healthy_step = self.step_count + (dt > 0)  # called before the step is counted
+
+    def check_health(self):
+        """Collective: raise UnstableRunError unless every particle value is finite and the
+        energy is bounded now (what a checkpoint or the last good state must satisfy)."""
+        p = self.particles
+        bad = any(not np.all(np.isfinite(a)) for a in p.fields.values() if a.dtype.kind == "f")
+        if self.decomp.allreduce_max(float(bad)):
+            raise UnstableRunError(f"non-finite particle values at t = {self.t:.6g} s (step "
+                                   f"{self.step_count}, dt = {self.dt:.3g} s; the stable step is "
+                                   f"about {self.critical_dt():.3g} s)")
+        self.check_energy(0.0)
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self):

@@ -32,6 +32,7 @@ from mpi4py import MPI
 
 from decomposition.slab import block_range
 
+from pmpm.errors import OutputWriteError
 from pmpm.io._parallel import (
     check_all,
     fill_value,
@@ -43,7 +44,8 @@ from pmpm.io._parallel import (
     write_rows,
 )
 
-__all__ = ["write_checkpoint", "read_checkpoint", "checkpoint_paths", "latest_checkpoint"]
+__all__ = ["write_checkpoint", "read_checkpoint", "checkpoint_paths", "latest_checkpoint",
+           "lastgood_path"]
 
 logger = logging.getLogger(__name__)
 
@@ -65,6 +67,12 @@ def checkpoint_paths(path_base):
     """
     base = os.fspath(path_base)
     return [f"{base}.ckpt{i}.h5" for i in (0, 1)]
+
+
+def lastgood_path(path_base):
+    """``<path_base>.lastgood.h5``: the newest state that passed the health checks, written
+    when a run fails (never one of the two alternating checkpoints)."""
+    return f"{os.fspath(path_base)}.lastgood.h5"
 
 
 def _complete_step(path):
@@ -128,7 +136,8 @@ def _agreed_specs(comm, fields):
     return out
 
 
-def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None, mode="mpio"):
+def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None, mode="mpio",
+                     path=None):
     """Write a checkpoint of every particle field (collective).
 
     Parameters
@@ -149,6 +158,9 @@ def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None
         Number of particle ids; default ``attrs["n_total"]`` or the largest id + 1.
     mode : {"mpio", "gather"}, optional
         Parallel HDF5 (default) or gather to rank 0 and write with plain h5py.
+    path : str, optional
+        Write this file instead of the next of the two alternating ones (the last good state
+        goes to its own file this way and never replaces a regular checkpoint).
 
     Returns
     -------
@@ -159,6 +171,9 @@ def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None
     ------
     ValueError
         On every rank, if the fields differ between ranks or carry bad ids.
+    pmpm.errors.OutputWriteError
+        On every rank, if the file cannot be written (a full disk, say); the other checkpoint
+        file is untouched.
     """
     rank, size = comm.Get_rank(), comm.Get_size()
     specs = _agreed_specs(comm, fields)
@@ -172,15 +187,33 @@ def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None
     bounds = owner_bounds(n_total, size, gather=gather)
     blocks, duplicates = to_id_blocks(comm, fields, specs, bounds)
     check_all(comm, duplicates == 0, f"{duplicates} particle ids appear more than once")
-    path = comm.bcast(_next_slot(path_base) if rank == 0 else None)
+    path = comm.bcast((path or _next_slot(path_base)) if rank == 0 else None)
     state = {**attrs, "time": float(time), "step": int(step), "n_total": n_total}
+    error = None
     if not gather or rank == 0:
-        _write_file(path, comm if not gather and size > 1 else None, state, specs, blocks,
-                    int(bounds[rank]))
+        try:
+            _write_file(path, comm if not gather and size > 1 else None, state, specs, blocks,
+                        int(bounds[rank]))
+        except (OSError, RuntimeError, ValueError) as exc:  # h5py reports a full disk as any of these
+            error = _write_reason(exc)
+    reasons = [r for r in comm.allgather(error) if r is not None]
+    if reasons:
+        raise OutputWriteError(path, reasons[0])
     # No rank returns before the file is complete (a caller may read it at once)
     comm.Barrier()
     logger.info("checkpoint step %d (t=%g) written to %s", step, time, path)
     return path
+
+
+def _write_reason(exc):
+    """A short reason for a failed write (errno text if any: 'No space left on device')."""
+    import errno
+    text = str(exc)
+    for code in (errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EROFS, errno.EIO):
+        name = os.strerror(code)
+        if name in text or getattr(exc, "errno", None) == code:
+            return name
+    return getattr(exc, "strerror", None) or type(exc).__name__
 
 
 def _write_file(path, comm, state, specs, blocks, start):
@@ -203,7 +236,7 @@ def _write_file(path, comm, state, specs, blocks, start):
         f.flush()
 
 
-def read_checkpoint(path_base, comm):
+def read_checkpoint(path_base, comm, path=None):
     """Read the newest complete checkpoint; rank ``r`` gets id block ``r`` (collective).
 
     Parameters
@@ -212,6 +245,9 @@ def read_checkpoint(path_base, comm):
         Common prefix of the checkpoint files.
     comm : mpi4py.MPI.Comm
         Communicator of the reading ranks (any size, not necessarily the writer's).
+    path : str, optional
+        Read this complete checkpoint file (e.g. :func:`lastgood_path`) instead of the newest
+        of the two alternating ones.
 
     Returns
     -------
@@ -230,7 +266,11 @@ def read_checkpoint(path_base, comm):
         If the files exist but none is complete.
     """
     paths = checkpoint_paths(path_base)
-    path = comm.bcast(latest_checkpoint(path_base) if comm.Get_rank() == 0 else None)
+    if path is not None:
+        ok = comm.bcast(_complete_step(path) is not None if comm.Get_rank() == 0 else None)
+        if not ok:
+            raise ValueError(f"{path} is missing, cut short or not a pmpm checkpoint")
+    path = path or comm.bcast(latest_checkpoint(path_base) if comm.Get_rank() == 0 else None)
     if path is None:
         existing = comm.bcast([p for p in paths if os.path.exists(p)] if comm.Get_rank() == 0 else None)
         if not existing:

@@ -20,44 +20,92 @@ logger = logging.getLogger(__name__)
 G = 9.80665
 
 
+#: largest record file read (a long record at 0.005 s holds a few MB)
+MAX_RECORD_BYTES = 64 << 20
+
+
+def _read_text(path):
+    """The file as text; refuses devices, huge and non-UTF-8 files (never quoting them)."""
+    import stat
+    with open(path, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+            raise ValueError("not a regular file")
+        raw = fh.read(MAX_RECORD_BYTES + 1)
+    if len(raw) > MAX_RECORD_BYTES:
+        raise ValueError(f"larger than {MAX_RECORD_BYTES >> 20} MB")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"not UTF-8 text (byte {exc.start})") from None
+
+
+def _numbers(text, first_line):
+    """Floats of whitespace/comma separated text; the error names the line, not its content."""
+    out = []
+    for k, line in enumerate(text.splitlines()):
+        for word in line.replace(",", " ").split():
+            try:
+                out.append(float(word))
+            except ValueError:
+                raise ValueError(f"line {first_line + k} holds something that is not a number") from None
+    return np.array(out, dtype=float)
+
+
 def _read_at2(path):
-    with open(path) as fh:
-        lines = fh.readlines()
+    lines = _read_text(path).splitlines()
     header = " ".join(lines[:4]).upper()
     npts = re.search(r"NPTS\s*=\s*(\d+)", header)
     dt = re.search(r"DT\s*=\s*([0-9.Ee+-]+)", header)
     if not (npts and dt):
         raise ValueError("no 'NPTS=' and 'DT=' in the first four lines (PEER .AT2 header)")
-    values = np.array(" ".join(lines[4:]).replace(",", " ").split(), dtype=float)
+    try:
+        step = float(dt.group(1))
+    except ValueError:
+        raise ValueError("the header's DT is not a number") from None
+    if not (np.isfinite(step) and step > 0):
+        raise ValueError(f"the header's DT must be a positive number (got {step:g})")
+    values = _numbers("\n".join(lines[4:]), 5)
     n = int(npts.group(1))
     if len(values) < n:
         raise ValueError(f"header says NPTS={n} but the file holds {len(values)} values")
-    t = np.arange(n) * float(dt.group(1))
+    t = np.arange(n) * step
     return t, values[:n] * G
 
 
 def _read_two_column(path):
-    data = np.loadtxt(path, comments=("#", "%"), delimiter=None, ndmin=2)
-    if data.shape[1] != 2:
-        raise ValueError(f"expected two columns (time, acceleration), found {data.shape[1]}")
+    rows = []
+    for k, line in enumerate(_read_text(path).splitlines()):
+        line = line.split("#")[0].split("%")[0].strip()
+        if not line:
+            continue
+        row = _numbers(line, k + 1)
+        if len(row) != 2:
+            raise ValueError(f"line {k + 1}: expected two columns (time, acceleration), found {len(row)}")
+        rows.append(row)
+    if not rows:
+        raise ValueError("no data lines")
+    data = np.array(rows)
     t, a = data[:, 0], data[:, 1]
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"time on data line {int(np.argmax(~np.isfinite(t))) + 1} is not finite")
     if np.any(np.diff(t) <= 0):
         raise ValueError("times must increase")
     return t, a
 
 
 def read_record(path, fmt="auto"):
-    """(t, a) of an acceleration record in SI units; a ConfigError naming the file if unusable."""
+    """(t, a) of an acceleration record in SI units; a ConfigError naming the file if unusable
+    (the reason never quotes the file's contents)."""
     if fmt == "auto":
         fmt = "at2" if path.lower().endswith(".at2") else "two_column"
     try:
         t, a = _read_at2(path) if fmt == "at2" else _read_two_column(path)
     except OSError as exc:
-        raise ConfigError(path, f"cannot read ground motion ({exc.strerror or exc})") from None
+        raise ConfigError(path, f"cannot read ground motion ({exc.strerror or type(exc).__name__})") from None
     except ValueError as exc:
         raise ConfigError(path, f"not a valid {fmt} acceleration record ({exc})") from None
     if len(t) < 2 or not np.all(np.isfinite(a)):
-        raise ConfigError(path, "ground motion needs at least two finite samples")
+        raise ConfigError(path, "ground motion needs at least two samples, all finite")
     return t, a
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["generate_body", "body_points"]
+__all__ = ["generate_body", "body_points", "inside_body", "check_overlaps"]
 logger = logging.getLogger(__name__)
 
 
@@ -103,17 +103,34 @@ def _mesh(geo, scene_dir, thickness):
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
             mesh = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types; all mean "cannot use this file"
-        lines = [ln.strip() for ln in said.getvalue().splitlines() if ln.strip()]
-        detail = (lines[-1].removeprefix("Error: ") if isinstance(exc, SystemExit) and lines
-                  else f"{type(exc).__name__}: {exc}")
-        raise ConfigError(path, f"cannot read mesh ({' '.join(detail.split())})") from None
+        # meshio's messages can quote the file's bytes: the error line names only the kind
+        detail = ("not a mesh format meshio reads" if isinstance(exc, SystemExit)
+                  else f"meshio: {type(exc).__name__}")
+        raise ConfigError(path, f"cannot read mesh ({detail})") from None
     if said.getvalue().strip():
-        logger.warning("meshio on %s: %s", path, " ".join(said.getvalue().split()))
-    pts = mesh.points[:, :2] * geo["scale"] + np.asarray(geo["offset"])
+        logger.warning("meshio printed %d line(s) while reading %s", len(said.getvalue().splitlines()), path)
+    points = np.asarray(mesh.points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] < 2 or not np.all(np.isfinite(points[:, :2])):
+        raise ConfigError(path, "mesh node coordinates are missing or not finite")
+    pts = points[:, :2] * geo["scale"] + np.asarray(geo["offset"])
     n = geo["particles_per_element"]
     out, vols = [], []
+    scale = float(np.ptp(pts, axis=0).max()) if len(pts) else 0.0
     for block in mesh.cells:
-        conn = block.data
+        conn = np.asarray(block.data)
+        if block.type not in ("triangle", "quad"):
+            continue
+        if conn.size and (conn.min() < 0 or conn.max() >= len(pts)):
+            e = int(np.argmax((conn < 0).any(axis=1) | (conn >= len(pts)).any(axis=1)))
+            raise ConfigError(path, f"{block.type} element {e} refers to a node that does not exist "
+                                    f"(the mesh has {len(pts)} nodes)")
+        corners = pts[conn]  # (E, k, 2)
+        signed = 0.5 * np.sum(corners[:, :, 0] * np.roll(corners[:, :, 1], -1, axis=1)
+                              - corners[:, :, 1] * np.roll(corners[:, :, 0], -1, axis=1), axis=1)
+        degenerate = np.abs(signed) <= 1e-12 * scale * scale
+        if degenerate.any():
+            raise ConfigError(path, f"{block.type} element {int(np.argmax(degenerate))} has zero area "
+                                    f"(coincident or collinear nodes)")
         if block.type == "triangle":
             # n points per triangle on a barycentric subdivision: k x k sub-triangles' centroids
             k = max(1, int(round(math.sqrt(n))))
@@ -172,6 +189,46 @@ def body_points(body, grid, scene_dir, key="body"):
         pts, area, thickness = _i_section(geo, grid, ppc, key)
         return pts, area * thickness
     return _mesh(geo, scene_dir, t)
+
+
+def inside_body(body, pts, tol):
+    """Mask of ``pts`` that lie inside ``body``'s shape by more than ``tol`` (None for a mesh,
+    whose region is not tested)."""
+    geo = body.geometry
+    if body.shape == "rectangle":
+        lo, hi = np.asarray(geo["lower"]) + tol, np.asarray(geo["upper"]) - tol
+        return np.all((pts > lo) & (pts < hi), axis=1)
+    if body.shape == "circle":
+        r = geo["radius"] - tol
+        return np.sum((pts - np.asarray(geo["center"])) ** 2, axis=1) < r * r
+    if body.shape == "polygon":
+        return _inside_polygon(pts, geo["vertices"])
+    if body.shape == "i_section":
+        start, end = np.asarray(geo["start"]), np.asarray(geo["end"])
+        length = float(np.linalg.norm(end - start))
+        direction = (end - start) / length
+        rel = pts - start
+        along = rel @ direction
+        across = rel @ np.array([-direction[1], direction[0]])
+        return (along > tol) & (along < length - tol) & (np.abs(across) < geo["depth"] / 2 - tol)
+    return None
+
+
+def check_overlaps(bodies, points_of, h):
+    """Refuse two bodies whose regions overlap (their masses would add up there): a point of
+    one lying inside another by more than 1e-6 of a cell. Touching is fine; meshes are not
+    tested. ``points_of[k]`` are the points of body ``k``."""
+    tol = 1e-6 * h
+    for i, a in enumerate(bodies):
+        for j, b in enumerate(bodies):
+            if i == j or len(points_of[j]) == 0:
+                continue
+            inside = inside_body(a, points_of[j], tol)
+            if inside is not None and inside.any():
+                p = points_of[j][int(np.argmax(inside))]
+                raise ConfigError(f"bodies[{max(i, j)}]", f"overlaps bodies[{min(i, j)}] (a point at "
+                                                         f"({p[0]:g}, {p[1]:g}) lies in both); "
+                                                         f"bodies may touch but not overlap")
 
 
 def _initial_velocity(body, pts, key):

@@ -10,7 +10,7 @@ import os
 import numpy as np
 
 from decomposition import SlabDecomposition, balanced_bounds, max_ranks
-from pmpm.scene.bodies import generate_body
+from pmpm.scene.bodies import check_overlaps, generate_body
 from pmpm.errors import ConfigError
 from pmpm.core.particles import CORE_FIELDS, OPTIONAL_FIELDS, Particles
 
@@ -30,6 +30,7 @@ def place_points(scene, grid, materials, labels):
         pts["mat"] = np.full(n, mat_index, dtype=np.int32)
         pts["body"] = np.full(n, k, dtype=np.int32)
         parts.append(pts)
+    check_overlaps(scene.bodies, [p["x"] for p in parts], grid.h)
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
 
 

@@ -89,7 +89,7 @@ def test_sigkill_then_restart_on_another_rank_count_gives_the_same_result(tmp_pa
 
 
 def test_divergence_stops_every_rank_with_the_stable_step_and_saves_the_last_good_state(tmp_path):
-    case = BAR.replace("cfl = 0.5", "time_step = 0.2   # ten times the stable step")
+    case = BAR.replace("cfl = 0.5", "time_step = 0.2   # ten times the stable step\nallow_unstable_time_step = true")
     (tmp_path / "bad.toml").write_text(case)
     res = _mpirun(2, ["bad.toml", "--no-plots"], tmp_path, timeout=120)
     assert res.returncode == 3, res.stdout + res.stderr
