@@ -98,6 +98,8 @@ def _mesh(geo, scene_dir, thickness):
     import os
     import meshio
     path = geo["file"] if os.path.isabs(geo["file"]) else os.path.join(scene_dir, geo["file"])
+    if not os.path.isfile(path):  # also keeps meshio off devices such as /dev/zero
+        raise ConfigError(path, "cannot read mesh (no such regular file)")
     said = io.StringIO()  # meshio prints reader errors and calls sys.exit(1) on unreadable files
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):

@@ -1,0 +1,420 @@
+"""Bad scenes, files and checkpoints through the real command line (issue 10).
+
+Every case runs ``python -m pmpm.cli`` in a subprocess, in its own directory, with a timeout (a
+hang fails the case instead of blocking the suite), and asserts pmpm's promise: the exit code,
+exactly one line on standard error that starts ``pmpm: error:``, no traceback anywhere, and no
+file written (the directory tree is the same before and after). Errors found while the scene is
+parsed are checked with ``--check`` (no particles, no kernels: about a second each); the others
+(memory per rank, particle placement, restart) with a real start, which stops before any
+output is written.
+"""
+import hashlib
+import json
+import os
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+EXIT_BAD_INPUT, EXIT_WRITE_FAILED = 2, 4
+#: a case is a hang if it takes longer than this (a refusal takes one to a few seconds)
+TIMEOUT = 60
+
+BASE = """\
+[grid]
+cell_size = 0.5
+cells = [8, 4]
+
+[materials.steel]
+type = "linear_elastic"
+E = 100.0
+nu = 0.3
+density = 1.0
+
+[[bodies]]
+name = "block"
+shape = "rectangle"
+material = "steel"
+lower = [0.0, 0.0]
+upper = [2.0, 1.0]
+velocity = [0.1, 0.0]
+
+[solver]
+end_time = 0.01
+"""
+
+SHELL_ESCAPE = ("[c for c in ().__class__.__base__.__subclasses__() if c.__name__ == '_wrap_close'][0]"
+                ".__init__.__globals__['system']('touch pwned') * 0 + 0.1")
+
+
+def sub(old, new):
+    def edit(text):
+        assert old in text, old
+        return text.replace(old, new, 1)
+    return edit
+
+
+def add(extra):
+    return lambda text: text + "\n" + extra + "\n"
+
+
+def top(extra):
+    return lambda text: extra + "\n" + text
+
+
+def velocity(expr):
+    return sub("velocity = [0.1, 0.0]", f"velocity = [{json.dumps(expr)}, 0.0]")
+
+
+def body(extra):
+    return add("[[bodies]]\nmaterial = \"steel\"\n" + extra)
+
+
+def ground(record_name, fmt=None):
+    return add('[[boundary]]\ntype = "fixed"\nlower = [0.0, 0.0]\nupper = [4.0, 0.0]\n'
+               f'[loads.ground_motion]\nfile = "{record_name}"' + (f'\nformat = "{fmt}"' if fmt else ""))
+
+
+MESH_HEAD = "# vtk DataFile Version 4.2\nmesh\nASCII\nDATASET UNSTRUCTURED_GRID\n"
+MESH_MISSING_NODE = (MESH_HEAD + "POINTS 4 double\n0.5 0.5 0\n1.5 0.5 0\n1.5 1.5 0\n0.5 1.5 0\n"
+                     "CELLS 2 8\n3 0 1 2\n3 0 2 9\nCELL_TYPES 2\n5\n5\n")
+MESH_COINCIDENT = (MESH_HEAD + "POINTS 4 double\n0.5 0.5 0\n1.5 0.5 0\n1.5 1.5 0\n1.5 1.5 0\n"
+                   "CELLS 2 8\n3 0 1 2\n3 0 2 3\nCELL_TYPES 2\n5\n5\n")
+MESH_BODY = sub('shape = "rectangle"\nmaterial = "steel"\nlower = [0.0, 0.0]\nupper = [2.0, 1.0]',
+                'shape = "mesh"\nmaterial = "steel"\nfile = "part.vtk"')
+SECRET = "root:SECRET-HASH-DO-NOT-PRINT:19000:0:99999:7:::"
+AT2_HEAD = "PEER NGA STRONG MOTION DATABASE RECORD\nTEST 1999\nACCELERATION TIME SERIES IN UNITS OF G\n"
+
+#: id -> (edit of BASE, extra files {name: str | bytes}, extra args, exit code, the error line
+#: must contain); args "--check" for parse-time errors, [] for those found at the start of a run
+CASES = {
+    # 1. code in expressions (the issue's escape runs 'touch pwned' if anything evaluates it)
+    "escape-shell": (velocity(SHELL_ESCAPE), {}, ["--check"], 2, "bodies[0].velocity: expression refused"),
+    "escape-shell-run": (velocity(SHELL_ESCAPE), {}, [], 2, "bodies[0].velocity: expression refused"),
+    "escape-in-variant": (add(f'[variants.v]\n"bodies.0.velocity" = [{json.dumps(SHELL_ESCAPE)}, 0.0]'),
+                          {}, ["--check"], 2, "bodies[0].velocity: expression refused"),
+    "escape-import": (velocity("__import__('os').system('touch pwned')"), {}, ["--check"], 2, "expression refused"),
+    "escape-dunder": (velocity("().__class__.__bases__"), {}, ["--check"], 2, "expression refused"),
+    "escape-open": (velocity("open('pwned', 'w')"), {}, ["--check"], 2, "cannot call 'open'"),
+    "escape-lambda": (velocity("(lambda: 0)()"), {}, ["--check"], 2, "expression refused"),
+    "escape-attribute": (velocity("x.real"), {}, ["--check"], 2, "expression refused"),
+    "escape-string": (velocity("'a' * 10"), {}, ["--check"], 2, "expression refused"),
+    "hang-power-tower": (velocity("10**10**10"), {}, ["--check"], 2, "exponent of ** must be a number"),
+    "hang-power-tower-run": (velocity("9**9**9**9"), {}, [], 2, "exponent of ** must be a number"),
+    "power-too-large": (velocity("x**1000"), {}, ["--check"], 2, "too large"),
+    "power-variable": (velocity("2**x"), {}, ["--check"], 2, "must be a number"),
+    "constant-overflow": (velocity("1e400"), {}, ["--check"], 2, "not finite"),
+    "expr-division-by-zero": (velocity("x/0"), {}, ["--check"], 2, "bodies[0].velocity: expression 'x/0' is not finite"),
+    "expr-nan": (velocity("sqrt(-1-x)"), {}, ["--check"], 2, "is not finite"),
+    "expr-overflow": (velocity("exp(1000*x)"), {}, ["--check"], 2, "is not finite"),
+    "expr-unknown-name": (velocity("0.1*sin(z)"), {}, ["--check"], 2, "unknown name 'z'"),
+    "expr-syntax": (velocity("0.1 *"), {}, ["--check"], 2, "not valid arithmetic syntax"),
+    "expr-too-long": (velocity("x+" * 300 + "x"), {}, ["--check"], 2, "longer than 500"),
+    "expr-keyword": (velocity("sin(x=1)"), {}, ["--check"], 2, "no keyword"),
+    "velocity-not-list": (sub("velocity = [0.1, 0.0]", "velocity = 0.1"), {}, ["--check"], 2, "bodies[0].velocity"),
+    # 2. names that become file names
+    "variant-traversal": (add('[variants."/../../../escaped"]\n"solver.cfl" = 0.4'), {}, [], 2,
+                          "variants./../../../escaped: variant name"),
+    "variant-parent": (add('[variants."../victim"]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "variant name"),
+    "variant-empty": (add('[variants.""]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "must not be empty"),
+    "variant-reserved": (add('[variants.CON]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "reserved name"),
+    "variant-space": (add('[variants."a b"]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "may hold only"),
+    "variant-dots": (add('[variants."a..b"]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "'..'"),
+    "variant-hidden": (add('[variants.".h5"]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "may hold only"),
+    "track-separator": (add('[[output.track]]\nname = "a/b"\npoint = [1.0, 0.5]'), {}, ["--check"], 2,
+                        "output.track[0].name: track name 'a/b'"),
+    "track-time": (add('[[output.track]]\nname = "time"\npoint = [1.0, 0.5]'), {}, ["--check"], 2, "reserved"),
+    "track-empty": (add('[[output.track]]\nname = ""\npoint = [1.0, 0.5]'), {}, ["--check"], 2, "must not be empty"),
+    "track-dotdot": (add('[[output.track]]\nname = ".."\npoint = [1.0, 0.5]'), {}, ["--check"], 2, "track name"),
+    "track-case-clash": (add('[[output.track]]\nname = "tip"\npoint = [1.0, 0.5]\n'
+                             '[[output.track]]\nname = "TIP"\npoint = [1.5, 0.5]'), {}, ["--check"], 2,
+                         "gives the file"),
+    "track-variant-clash": (add('[[output.track]]\nname = "a"\npoint = [1.0, 0.5]\n'
+                                '[[output.track]]\nname = "a_b"\npoint = [1.5, 0.5]\n'
+                                '[variants.b_c]\n"solver.cfl" = 0.4\n[variants.c]\n"solver.cfl" = 0.3'),
+                            {}, ["--check"], 2, "gives the file 'a_b_c.csv'"),
+    "output-directory-empty": (add('[output]\ndirectory = ""'), {}, ["--check"], 2, "output.directory: must be"),
+    "output-directory-is-file": (add('[output]\ndirectory = "afile"'), {"afile": "x"}, ["--check"], 2,
+                                 "is not a directory"),
+    "output-directory-below-file": (add('[output]\ndirectory = "afile/sub"'), {"afile": "x"}, ["--check"], 2,
+                                    "lies below a file"),
+    "output-directory-nul": (add('[output]\ndirectory = "a\\u0000b"'), {}, ["--check"], 2, "output.directory"),
+    # 3. resources: memory per rank, integer range, grid extent
+    "cells-1e9": (sub("cells = [8, 4]", "cells = [1000000000, 1000000000]"), {}, ["--check"], 2,
+                  "grid.cells: a rank would need about"),
+    "cells-20000": (sub("cells = [8, 4]", "cells = [20000, 20000]"), {}, [], 2, "grid.cells: a rank would need"),
+    "cells-100000": (sub("cells = [8, 4]", "cells = [100000, 100000]"), {}, [], 2, "grid.cells: a rank would need"),
+    "cells-int64-max": (sub("cells = [8, 4]", "cells = [9223372036854775807, 20]"), {}, ["--check"], 2,
+                        "grid.cells: at most"),
+    "cell-size-overflow": (sub("cell_size = 0.5", "cell_size = 1e308"), {}, ["--check"], 2,
+                           "grid.cells: the grid's extent"),
+    "cell-size-underflow": (sub("cell_size = 0.5", "cell_size = 1e-12\norigin = [1e6, 0.0]"), {}, ["--check"], 2,
+                            "grid.cell_size: too small"),
+    # 4. time steps
+    "density-denormal": (sub("density = 1.0", "density = 1e-320"), {}, ["--check"], 2,
+                         "materials.steel: wave speed"),
+    "density-denormal-run": (sub("density = 1.0", "density = 1e-320"), {}, [], 2, "materials.steel: wave speed"),
+    "E-huge": (sub("E = 100.0", "E = 1e300"), {}, ["--check"], 2, "solver.max_estimated_steps"),
+    "end-time-huge": (sub("end_time = 0.01", "end_time = 1e12"), {}, ["--check"], 2, "steps to end_time"),
+    "max-estimated-steps": (sub("end_time = 0.01", "end_time = 10.0\nmax_estimated_steps = 10"), {}, ["--check"], 2,
+                            "more than solver.max_estimated_steps = 10"),
+    "time-step-100x": (sub("end_time = 0.01", "end_time = 0.01\ntime_step = 2.0"), {}, ["--check"], 2,
+                       "solver.time_step: 2 s is above the stable step"),
+    "time-step-above-run": (sub("end_time = 0.01", "end_time = 0.01\ntime_step = 0.0475"), {}, [], 2,
+                            "solver.time_step:"),
+    "time-step-zero": (sub("end_time = 0.01", "end_time = 0.01\ntime_step = 0.0"), {}, ["--check"], 2,
+                       "solver.time_step: must be > 0"),
+    "allow-unstable-not-bool": (sub("end_time = 0.01", "end_time = 0.01\nallow_unstable_time_step = 1"), {},
+                                ["--check"], 2, "solver.allow_unstable_time_step: must be true or false"),
+    # 5. geometry
+    "polygon-bow-tie": (body('shape = "polygon"\nvertices = [[2.5, 0.5], [3.5, 1.5], [3.5, 0.5], [2.5, 1.5]]'),
+                        {}, ["--check"], 2, "bodies[1].vertices:"),
+    "polygon-collinear": (body('shape = "polygon"\nvertices = [[2.5, 0.5], [3.0, 0.5], [3.5, 0.5]]'),
+                          {}, ["--check"], 2, "zero area"),
+    "polygon-repeated-vertex": (body('shape = "polygon"\nvertices = [[2.5, 0.5], [3.5, 0.5], [3.5, 0.5], [3.0, 1.5]]'),
+                                {}, ["--check"], 2, "coincide"),
+    "duplicate-body-names": (body('name = "block"\nshape = "rectangle"\nlower = [2.5, 0.0]\nupper = [3.5, 1.0]'),
+                             {}, ["--check"], 2, "bodies[1].name: body name 'block' is already used"),
+    "overlapping-bodies": (body('name = "b2"\nshape = "circle"\ncenter = [1.5, 1.0]\nradius = 0.6'), {}, [], 2,
+                           "bodies[1]: overlaps bodies[0]"),
+    "mesh-missing-node": (MESH_BODY, {"part.vtk": MESH_MISSING_NODE}, [], 2,
+                          "part.vtk: triangle element 1 refers to a node that does not exist"),
+    "mesh-coincident-nodes": (MESH_BODY, {"part.vtk": MESH_COINCIDENT}, [], 2,
+                              "part.vtk: triangle element 1 has zero area"),
+    "mesh-dev-zero": (sub('shape = "rectangle"\nmaterial = "steel"\nlower = [0.0, 0.0]\nupper = [2.0, 1.0]',
+                          'shape = "mesh"\nmaterial = "steel"\nfile = "/dev/zero"'), {}, [], 2,
+                      "/dev/zero: cannot read mesh"),
+    # 6. ground-motion records
+    "record-nan-time": (ground("rec.txt"), {"rec.txt": "0.0 0.1\nnan 0.2\n0.02 0.0\n"}, [], 2,
+                        "rec.txt: not a valid two_column acceleration record (time on data line 2 is not finite)"),
+    "record-at2-dt-zero": (ground("rec.at2"), {"rec.at2": AT2_HEAD + "NPTS=   4, DT=   0.0000 SEC\n0.1 0.2 0.1 0.0\n"},
+                           [], 2, "the header's DT must be a positive number"),
+    "record-secret-file": (ground("shadow"), {"shadow": SECRET + "\n"}, [], 2, "shadow: not a valid"),
+    "record-missing": (ground("nope.txt"), {}, [], 2, "nope.txt: cannot read ground motion"),
+    "record-dev-zero": (ground("/dev/zero"), {}, [], 2, "/dev/zero: not a valid two_column acceleration record"),
+    "record-not-utf8": (ground("rec.txt"), {"rec.txt": b"0.0 0.1\n\xff\xfe 0.2\n"}, [], 2, "not UTF-8"),
+    "record-one-column": (ground("rec.txt"), {"rec.txt": "0.0\n0.01\n"}, [], 2, "expected two columns"),
+    # 7. the scene file itself
+    "scene-stray-ff": (lambda t: t.encode() + b"\n# \xff\n", {}, ["--check"], 2, "case.toml: not UTF-8 text"),
+    "scene-utf16-bom": (lambda t: t.encode("utf-16"), {}, ["--check"], 2, "case.toml: not UTF-8 text"),
+    "scene-utf8-bom": (lambda t: b"\xef\xbb\xbf" + t.encode(), {}, ["--check"], 2, "byte-order mark"),
+    "scene-binary": (lambda t: bytes(range(256)) * 4, {}, ["--check"], 2, "case.toml: not UTF-8 text"),
+    "scene-nul-bytes": (lambda t: b"\0" * 64, {}, ["--check"], 2, "case.toml: not valid TOML"),
+    "scene-huge": (lambda t: t + "#" * (2 << 20), {}, ["--check"], 2, "not a scene file"),
+    "scene-name-space": ("rename:my case.toml", {}, ["--check"], 2, "may hold only"),
+}
+
+
+def _tree(root):
+    """Every path below ``root`` with a digest of its content (what 'nothing written' means)."""
+    out = {}
+    for base, dirs, files in os.walk(root):
+        for d in dirs:
+            out[os.path.relpath(os.path.join(base, d), root)] = "dir"
+        for f in files:
+            p = os.path.join(base, f)
+            with open(p, "rb") as fh:
+                out[os.path.relpath(p, root)] = hashlib.sha256(fh.read()).hexdigest()
+    return out
+
+
+def run_cli(cwd, *args, timeout=TIMEOUT):
+    return subprocess.run([sys.executable, "-m", "pmpm.cli", *args], cwd=cwd, capture_output=True,
+                          timeout=timeout)
+
+
+def assert_promise(proc, code, expected):
+    """Exit code, exactly one error line containing ``expected``, no traceback; returns it."""
+    err = proc.stderr.decode("utf-8", "replace")
+    out = proc.stdout.decode("utf-8", "replace")
+    assert proc.returncode == code, (proc.returncode, out, err)
+    assert "Traceback" not in err + out, err + out
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("pmpm: error: ") and expected in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_keeps_the_promise(tmp_path, name):
+    edit, files, args, code, expected = CASES[name]
+    # three folders deep, so a traversal of up to three levels lands in the watched tree
+    work = tmp_path / "a" / "b" / "c"
+    work.mkdir(parents=True)
+    case = "case.toml"
+    if isinstance(edit, str) and edit.startswith("rename:"):
+        case, data = edit.split(":", 1)[1], BASE
+    else:
+        data = edit(BASE)
+    (work / case).write_bytes(data if isinstance(data, bytes) else data.encode())
+    for fname, content in files.items():
+        (work / fname).write_bytes(content if isinstance(content, bytes) else content.encode())
+    before = _tree(tmp_path)
+    line = assert_promise(run_cli(work, case, *args), code, expected)
+    assert _tree(tmp_path) == before, "a file was written"
+    assert "SECRET" not in line  # an error line never quotes a file's contents
+
+
+def test_scene_from_dev_zero_and_a_directory(tmp_path):
+    for target, expected in (("/dev/zero", "/dev/zero: is not a regular file"),
+                             (str(tmp_path), "cannot read")):
+        before = _tree(tmp_path)
+        assert_promise(run_cli(tmp_path, target, "--check"), 2, expected)
+        assert _tree(tmp_path) == before
+
+
+def test_unwritable_output_directory(tmp_path):
+    if os.geteuid() == 0:
+        pytest.skip("root may write anywhere: permissions cannot make a directory unwritable")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        (tmp_path / "case.toml").write_text(BASE + '\n[output]\ndirectory = "ro/out"\n')
+        assert_promise(run_cli(tmp_path, "case.toml", "--check"), 2, "is not writable")
+    finally:
+        ro.chmod(0o700)
+
+
+# -- restart: foreign and crafted checkpoints ------------------------------------------------
+
+CKPT_SCENE = BASE.replace("end_time = 0.01", "end_time = 0.1") + "\n[output]\ncheckpoint_interval = 0.05\n"
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    """A real run with checkpoints (one start of the kernels for the whole module)."""
+    work = tmp_path_factory.mktemp("ckpt")
+    (work / "case.toml").write_text(CKPT_SCENE)
+    proc = run_cli(work, "case.toml", "--no-plots", "-q", timeout=600)
+    assert proc.returncode == 0, proc.stderr.decode()
+    return work
+
+
+def _copy_run(src, dst):
+    import shutil
+    shutil.copytree(src, dst, dirs_exist_ok=True)
+    return dst
+
+
+def _craft(path, edit_attrs=None, edit_fields=None):
+    """Rewrite a checkpoint in place: its attrs JSON and/or particle arrays."""
+    with h5py.File(path, "r+") as f:
+        attrs = json.loads(f.attrs["attrs"])
+        if edit_attrs:
+            edit_attrs(attrs)
+            f.attrs["attrs"] = json.dumps(attrs)
+            f.attrs["time"] = attrs.get("time", 0.0)
+        if edit_fields:
+            fields = {k: f["particles"][k][:] for k in f["particles"]}
+            edit_fields(fields)
+            for k, a in fields.items():
+                f["particles"][k][...] = a
+
+
+def _dup_ids(fields):
+    fields["id"][1] = fields["id"][0]
+
+
+def _nan_x(fields):
+    fields["x"][3, 0] = np.nan
+
+
+def _drop_record(attrs):
+    del attrs["scene_record"]
+
+
+RESTARTS = {
+    # scene edit, checkpoint edit, --restart target, expected
+    "other-material": (sub("E = 100.0", "E = 200.0"), None, "case_results/case.h5",
+                       "case.toml: materials.steel.E: differs from the scene of the checkpoint"),
+    "other-geometry": (sub("upper = [2.0, 1.0]", "upper = [2.0, 1.5]"), None, "case_results/case.h5",
+                       "bodies[0].geometry.upper: differs"),
+    "other-scene-file": ("other.toml", None, "case_results/case.h5", "differs from the scene of the checkpoint"),
+    "duplicate-ids": (None, ("ids", _dup_ids), "case_results/case.h5", "ids are duplicated"),
+    "time-1e308": (None, ("attrs", lambda a: a.update(time=1e308)), "case_results/case.h5",
+                   "beyond solver.end_time"),
+    "time-nan": (None, ("attrs", lambda a: a.update(time=float("nan"))), "case_results/case.h5",
+                 "not a finite time"),
+    "nan-position": (None, ("ids", _nan_x), "case_results/case.h5", "non-finite particle values"),
+    "no-scene-record": (None, ("attrs", _drop_record), "case_results/case.h5", "records no scene"),
+    "particle-count": (None, ("attrs", lambda a: a.update(n_total=a["n_total"] + 5)), "case_results/case.h5",
+                       "particle ids"),
+    "missing-checkpoint": (None, None, "nowhere/case.h5", "cannot restart"),
+    "garbage-checkpoint": (None, ("garbage", None), "case_results/case.h5", "cannot restart"),
+}
+
+
+@pytest.mark.parametrize("name", list(RESTARTS))
+def test_restart_refuses_foreign_and_crafted_checkpoints(tmp_path, finished_run, name):
+    scene_edit, ckpt_edit, target, expected = RESTARTS[name]
+    work = _copy_run(finished_run, tmp_path / "w")
+    case = "case.toml"
+    if isinstance(scene_edit, str):  # another scene file restarted from this one's checkpoint
+        case = scene_edit
+        (work / case).write_text(CKPT_SCENE.replace('name = "block"', 'name = "other"'))
+    elif scene_edit is not None:
+        (work / case).write_text(scene_edit(CKPT_SCENE))
+    if ckpt_edit is not None:
+        kind, fn = ckpt_edit
+        for k in (0, 1):
+            path = work / "case_results" / f"case.ckpt{k}.h5"
+            if kind == "garbage":
+                path.write_bytes(b"not an HDF5 file")
+            elif kind == "attrs":
+                _craft(path, edit_attrs=fn)
+            else:
+                _craft(path, edit_fields=fn)
+    before = _tree(tmp_path)
+    assert_promise(run_cli(work, case, "--restart", target, "--no-plots"), 2, expected)
+    assert _tree(tmp_path) == before, "a file was written (another run's checkpoint touched?)"
+
+
+def test_a_fresh_run_never_writes_over_another_scene_files(tmp_path, finished_run):
+    """other.toml sends its output into case.toml's folder and file names: refused."""
+    work = _copy_run(finished_run, tmp_path / "w")
+    os.rename(work / "case.toml", work / "orig.toml")
+    (work / "sub").mkdir()
+    (work / "sub" / "case.toml").write_text(CKPT_SCENE.replace("[output]", '[output]\ndirectory = "../case_results"'))
+    before = _tree(tmp_path)
+    assert_promise(run_cli(work / "sub", "case.toml", "--no-plots"), 2,
+                   "output.directory: ")
+    assert _tree(tmp_path) == before
+
+
+# -- a full disk -------------------------------------------------------------------------------
+
+def test_full_disk_stops_with_one_line_naming_the_file(tmp_path):
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)],
+                             capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        # 3200 particles, 100 frames of x, v, stress (64 bytes a particle): 20 MB, far above
+        # the 256 KB disk; a checkpoint (about 0.4 MB) does not fit either
+        scene = (BASE.replace("cell_size = 0.5", "cell_size = 0.05").replace("cells = [8, 4]", "cells = [80, 40]")
+                 .replace("end_time = 0.01", "end_time = 0.05")
+                 + f'\n[output]\ndirectory = "{disk}/out"\ninterval = 0.0005\ncheckpoint_interval = 0.01\n')
+        (tmp_path / "case.toml").write_text(scene)
+        proc = run_cli(tmp_path, "case.toml", "--no-plots", timeout=300)
+        line = assert_promise(proc, EXIT_WRITE_FAILED, str(disk / "out" / "case"))
+        assert "No space left on device" in line
+        for k in (0, 1):  # a checkpoint that is marked complete is whole and readable
+            path = disk / "out" / f"case.ckpt{k}.h5"
+            if path.exists():
+                try:
+                    with h5py.File(path, "r") as f:
+                        complete = bool(f.attrs.get("complete", False))
+                        if complete:
+                            assert np.isfinite(f["particles/x"][:]).all()
+                except OSError:
+                    pass  # cut short by the full disk: never marked complete
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
