@@ -8,6 +8,7 @@ every rank with a message, writes a checkpoint of its last good state and exits 
 Calling this module, ``pmpm.run(scene, overrides=..., write=False)``, is the Python API:
 :func:`pmpm.api.run` (docs/api.md).
 """
+import gc
 import json
 import logging
 import math
@@ -59,6 +60,31 @@ def _owner(path):
     return None
 
 
+#: bytes left free beyond a write's estimate (HDF5 metadata, the history rows, the XDMF file)
+DISK_MARGIN = 64 * 1024
+
+
+class _quiet_h5py_deallocs:
+    """h5py reports an error of releasing an HDF5 id (after a failed write, e.g. on a full
+    disk) through ``sys.excepthook`` from a deallocator; under MPI that hook aborts every rank.
+    Within this context such reports are only logged: the failed write itself is reported."""
+
+    def __enter__(self):
+        self.previous = sys.excepthook
+        sys.excepthook = lambda *exc: logger.debug("while releasing HDF5 objects: %s", exc[1])
+        return self
+
+    def __exit__(self, *exc):
+        sys.excepthook = self.previous
+        return False
+
+
+def _scene_location(scene_path, output):
+    """The scene file as seen from the output file's folder: what identifies the run that owns
+    an output (a folder copied with its scene keeps it; another scene file never has it)."""
+    return os.path.relpath(os.path.abspath(scene_path), os.path.dirname(os.path.abspath(output)))
+
+
 def _healthy_fields(fields):
     """True if the state a checkpoint would hold is finite (position, velocity, stress, ...)."""
     return all(np.all(np.isfinite(a)) for k, a in fields.items() if a.dtype.kind == "f")
@@ -100,10 +126,10 @@ class Run:
         from pmpm.scene.fingerprint import fingerprint, scene_record
         self.record = scene_record(scene)
         self.fingerprint = fingerprint(self.record)
-        if write:
-            self._check_own_files()
         if restart:
             self._restore(restart)
+        if write:
+            self._check_own_files()
         self.tracker = Tracker(scene.output.track, self.solver)
         s = self.solver
         self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
@@ -120,23 +146,64 @@ class Run:
         return {f: (p[f].shape[1:], p[f].dtype) for f in names}
 
     def _guard(self, path, fn, *args):
-        """Run a write on every rank; if it fails anywhere (full disk, I/O error), raise
-        OutputWriteError naming ``path`` on every rank together."""
+        """Run a write on every rank; if it fails anywhere (full disk, I/O error), close the
+        output and raise OutputWriteError naming ``path`` on every rank together."""
         from pmpm.errors import OutputWriteError
         from pmpm.io.checkpoint import _write_reason
         error, result = None, None
-        try:
-            result = fn(*args)
-        except (UnstableRunError, ParticleExitError):
-            raise  # collective verdicts, raised on every rank together: not a write failure
-        except OutputWriteError as exc:
-            error = (exc.path, exc.reason)
-        except (OSError, RuntimeError, ValueError) as exc:  # h5py and the OS on a failed write
-            error = (path, _write_reason(exc))
+        with _quiet_h5py_deallocs():
+            try:
+                result = fn(*args)
+            except (UnstableRunError, ParticleExitError):
+                raise  # collective verdicts, raised on every rank together: not a write failure
+            except OutputWriteError as exc:
+                error = (exc.path, exc.reason)
+            except (OSError, RuntimeError, ValueError) as exc:  # h5py and the OS on a failed write
+                error = (path, _write_reason(exc))
+            gc.collect()  # release the failed write's HDF5 objects while their errors are quiet
         failed = [e for e in self.comm.allgather(error) if e is not None]
         if failed:
+            self._drop_output()
             raise OutputWriteError(*failed[0])
         return result
+
+    def _ensure_space(self, path, nbytes, replaces=None):
+        """Refuse (every rank, OutputWriteError) a write of about ``nbytes`` that the file
+        system of ``path`` cannot hold, before HDF5 starts it: HDF5 does not recover from a
+        write cut short by a full disk (its files cannot even be closed cleanly), while a
+        refused write leaves every file as it was. ``replaces``: a file the write truncates."""
+        from pmpm.errors import OutputWriteError
+        short = None
+        if self.rank == 0:
+            import shutil
+            try:
+                free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+                if replaces and os.path.exists(replaces):
+                    free += os.path.getsize(replaces)
+                if free < nbytes + DISK_MARGIN:
+                    short = f"No space left on device: about {nbytes + DISK_MARGIN} bytes needed, {free} free"
+            except OSError as exc:
+                short = exc.strerror or type(exc).__name__
+        short = self.comm.bcast(short)
+        if short:
+            raise OutputWriteError(path, short)
+
+    def _row_bytes(self, names):
+        p = self.solver.particles.fields
+        return sum(int(np.prod(p[k].shape[1:], dtype=np.int64)) * p[k].dtype.itemsize for k in names if k in p)
+
+    def _drop_output(self):
+        """Close the results file after a failed write, ignoring what closing it reports."""
+        output, self.output = self.output, None
+        with _quiet_h5py_deallocs():
+            if output is not None and output.file is not None:
+                try:
+                    output.file.close()
+                except Exception:  # a full disk fails the final flush too; nothing to save
+                    pass
+                output.file = None
+            del output
+            gc.collect()
 
     def _base(self):
         return _checkpoint_base(self.path)
@@ -147,7 +214,7 @@ class Run:
         from pmpm.errors import ConfigError
         bad = None
         if self.rank == 0:
-            me = (self.scene.path, self.scene.variant)
+            me = (_scene_location(self.scene.path, self.path), self.scene.variant)
             for suffix in RUN_SUFFIXES:
                 path = self._base() + suffix
                 if os.path.exists(path):
@@ -178,8 +245,8 @@ class Run:
         self.comm.Barrier()
         attrs = {"scene": json.dumps(self.scene.to_dict(), default=str), "pmpm_version": __version__,
                  "variant": self.scene.variant, "title": self.scene.title,
-                 "scene_file": self.scene.path, "scene_fingerprint": self.fingerprint,
-                 "history_columns": list(HISTORY_COLUMNS)}
+                 "scene_file": _scene_location(self.scene.path, self.path),
+                 "scene_fingerprint": self.fingerprint, "history_columns": list(HISTORY_COLUMNS)}
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
@@ -279,6 +346,9 @@ class Run:
         if snap is None:
             s.check_health()
             snap = _Snapshot(s)
+        from pmpm.io.checkpoint import _next_slot
+        target = path or (_next_slot(self._base()) if self.rank == 0 else None)
+        self._ensure_space(target or self.path, s.n_total * self._row_bytes(snap.fields), replaces=target)
         ext, internal, damped = self.comm.allreduce(
             np.array([snap.external_work, snap.internal_work, snap.damping_work]))
         return write_checkpoint(
@@ -286,7 +356,7 @@ class Run:
             {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
              "internal_work": float(internal), "damping_work": float(damped),
              "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
-             "scene_file": self.scene.path, "variant": self.scene.variant,
+             "scene_file": _scene_location(self.scene.path, self.path), "variant": self.scene.variant,
              "scene_fingerprint": self.fingerprint, "scene_record": self.record},
             path=path)
 
@@ -318,6 +388,7 @@ class Run:
     def write_frame(self):
         if self.output:
             p = self.solver.particles
+            self._ensure_space(self.path, self.solver.n_total * self._row_bytes(self._frame_fields()))
             self._guard(self.path, self.output.write_frame, self.solver.t, self.solver.step_count,
                         {f: p[f] for f in self._frame_fields()})
             self._guard(self.path, self.flush_history)

@@ -392,29 +392,33 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path):
         pytest.skip("mounting a small tmpfs needs root")
     disk = tmp_path / "disk"
     disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)],
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
                              capture_output=True)
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
     try:
-        # 3200 particles, 100 frames of x, v, stress (64 bytes a particle): 20 MB, far above
-        # the 256 KB disk; a checkpoint (about 0.4 MB) does not fit either
-        scene = (BASE.replace("cell_size = 0.5", "cell_size = 0.05").replace("cells = [8, 4]", "cells = [80, 40]")
-                 .replace("end_time = 0.01", "end_time = 0.05")
-                 + f'\n[output]\ndirectory = "{disk}/out"\ninterval = 0.0005\ncheckpoint_interval = 0.01\n')
+        # 800 particles; a frame of x, v, stress is 58 KB, a checkpoint 100 KB: two checkpoints
+        # and a dozen frames fit in 1 MB, the run's 100 frames do not
+        scene = (BASE.replace("cell_size = 0.5", "cell_size = 0.1").replace("cells = [8, 4]", "cells = [40, 20]")
+                 .replace("end_time = 0.01", "end_time = 0.5")
+                 + '\n[output]\ndirectory = "disk/out"\ninterval = 0.005\ncheckpoint_interval = 0.02\n')
         (tmp_path / "case.toml").write_text(scene)
         proc = run_cli(tmp_path, "case.toml", "--no-plots", timeout=300)
-        line = assert_promise(proc, EXIT_WRITE_FAILED, str(disk / "out" / "case"))
-        assert "No space left on device" in line
-        for k in (0, 1):  # a checkpoint that is marked complete is whole and readable
-            path = disk / "out" / f"case.ckpt{k}.h5"
-            if path.exists():
-                try:
-                    with h5py.File(path, "r") as f:
-                        complete = bool(f.attrs.get("complete", False))
-                        if complete:
-                            assert np.isfinite(f["particles/x"][:]).all()
-                except OSError:
-                    pass  # cut short by the full disk: never marked complete
+        line = assert_promise(proc, EXIT_WRITE_FAILED, "disk/out/case")
+        assert "No space left on device" in line, line
+        complete = []
+        for k in (0, 1):  # the checkpoints written before the disk filled are whole
+            with h5py.File(disk / "out" / f"case.ckpt{k}.h5", "r") as f:
+                assert f.attrs["complete"] and np.isfinite(f["particles/x"][:]).all()
+                complete.append(float(f.attrs["time"]))
+        # and usable: the same scene continues from them once there is room
+        import shutil
+        room = tmp_path / "room"
+        shutil.copytree(disk, room / "disk")
+        shutil.copy(tmp_path / "case.toml", room / "case.toml")
+        (room / "case.toml").write_text(scene.replace("end_time = 0.5", "end_time = 0.1"))
+        proc = run_cli(room, "case.toml", "--restart", "disk/out/case.h5", "--no-plots", timeout=300)
+        assert proc.returncode == 0, proc.stderr.decode()
+        assert f"t = {max(complete):.6g} s" in proc.stdout.decode()
     finally:
         subprocess.run(["umount", str(disk)], capture_output=True)
