@@ -97,9 +97,10 @@ def test_divergence_stops_every_rank_with_the_stable_step_and_saves_the_last_goo
     assert "above the stable limit" in out            # warned at start
     errors = [ln for ln in res.stderr.splitlines() if ln.startswith("pmpm: error:")]
     assert len(errors) == 1 and "stable step is about" in errors[0]
-    ckpt = [f for f in os.listdir(tmp_path / "bad_results") if ".ckpt" in f]
-    assert ckpt
-    with h5py.File(tmp_path / "bad_results" / ckpt[0]) as f:
+    # the last good state has its own file; the scene writes no regular checkpoints
+    files = os.listdir(tmp_path / "bad_results")
+    assert "bad.lastgood.h5" in files and not [f for f in files if ".ckpt" in f]
+    with h5py.File(tmp_path / "bad_results" / "bad.lastgood.h5") as f:
         assert f.attrs["complete"]
         assert np.isfinite(f["particles/x"][:]).all() and np.isfinite(f["particles/v"][:]).all()
 
