@@ -466,12 +466,12 @@ class Run:
                 if s.t >= next_ckpt - eps:
                     self._guard(self.path, self.checkpoint)
                     next_ckpt = _next_multiple(s.t, out.checkpoint_interval, eps, False)
+                if s.healthy_step == s.step_count and snap.step != s.step_count:
+                    snap = _Snapshot(s)  # the newest state that passed the health checks
                 s.step()
             except (UnstableRunError, ParticleExitError) as exc:
                 self.fail(exc, snap)
                 raise
-            if s.healthy_step == s.step_count:
-                snap = _Snapshot(s)  # the newest state that passed the health checks
             now = time.perf_counter()
             if out.progress_interval and now - last_progress >= out.progress_interval:
                 last_progress = now

@@ -450,9 +450,11 @@ class Solver:
         self.dt = self.stable_dt(self.vmax)
         return dt
 
-    def check_energy(self, dt):
+    def check_energy(self, dt, pending=True):
         """Stop a run whose energy grows beyond what the loads put in (a diverging run grows
-        exponentially; a healthy one stays within a few percent)."""
+        exponentially; a healthy one stays within a few percent). ``pending``: called inside
+        a step of ``dt`` not yet counted (else on the state at ``self.t``)."""
+        t_now, step_now = (self.t + dt, self.step_count + 1) if pending else (self.t, self.step_count)
         e = self.energies()
         supplied = self.initial_energy + e["external_work"]
         scale = abs(self.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
@@ -461,11 +463,11 @@ class Solver:
         grown = max(e["total"], e["kinetic"]) - supplied
         if not math.isfinite(grown) or (grown > ENERGY_GROWTH_LIMIT * scale and scale > 0):
             raise UnstableRunError(
-                f"the run diverged at t = {self.t + dt:.6g} s (step {self.step_count + 1}): energy "
+                f"the run diverged at t = {t_now:.6g} s (step {step_now}): energy "
                 f"{e['total']:.4g} J exceeds the initial energy plus external work {supplied:.4g} J; "
                 f"dt = {dt:.3g} s, the stable step is about {self.critical_dt():.3g} s")
         self._vmax_healthy = self.vmax
-        self.healthy_step = self.step_count + (dt > 0)  # called before the step is counted
+        self.healthy_step = step_now
 
     def check_health(self):
         """Collective: raise UnstableRunError unless every particle value is finite and the
@@ -476,7 +478,7 @@ class Solver:
             raise UnstableRunError(f"non-finite particle values at t = {self.t:.6g} s (step "
                                    f"{self.step_count}, dt = {self.dt:.3g} s; the stable step is "
                                    f"about {self.critical_dt():.3g} s)")
-        self.check_energy(0.0)
+        self.check_energy(self.dt, pending=False)
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self):
