@@ -281,6 +281,10 @@ class Run:
         from decomposition import alltoallv_fields
         s.particles.fields = alltoallv_fields(self.comm, fields, s.decomp.owner_of_columns(cols))
         s.t, s.step_count, s.dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
+        if attrs.get("step_setting") != self._step_setting():
+            # the scene changed cfl or time_step (allowed on restart): the new rule from now on
+            s.vmax = s.decomp.allreduce_max(s._local_speed())
+            s.dt = s.stable_dt(s.vmax)
         s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
         s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
         s.initial_energy = float(attrs["initial_energy"])
@@ -288,6 +292,10 @@ class Run:
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
+
+    def _step_setting(self):
+        cfg = self.scene.solver
+        return [cfg.cfl, cfg.time_step]
 
     def _check_consistent(self, fields, attrs, path):
         """Refuse (on every rank) a checkpoint whose state this scene cannot continue."""
@@ -357,7 +365,8 @@ class Run:
              "internal_work": float(internal), "damping_work": float(damped),
              "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
              "scene_file": _scene_location(self.scene.path, self.path), "variant": self.scene.variant,
-             "scene_fingerprint": self.fingerprint, "scene_record": self.record},
+             "scene_fingerprint": self.fingerprint, "scene_record": self.record,
+             "step_setting": self._step_setting()},
             path=path)
 
     # -- recording --------------------------------------------------------------------------

@@ -16,6 +16,8 @@ __all__ = ["scene_record", "fingerprint", "first_difference", "CHANGEABLE_ON_RES
 CHANGEABLE_ON_RESTART = (
     "path", "title", "variants",
     "solver.end_time", "solver.max_steps", "solver.max_estimated_steps",
+    # the step may change, so a diverged run continues from its last good state with a smaller one
+    "solver.cfl", "solver.time_step", "solver.allow_unstable_time_step",
     "output.directory", "output.interval", "output.history_interval",
     "output.checkpoint_interval", "output.progress_interval", "output.deformed_plot",
     "parallel.",

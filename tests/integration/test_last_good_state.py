@@ -23,13 +23,13 @@ from pmpm.scene.config import parse_scene
 BAD_AFTER = 25  # steps; not a multiple of the energy-check interval (10) nor a checkpoint step
 
 
-def _scene(tmp_path, end_time=1.0):
+def _scene(tmp_path, end_time=1.0, cfl=0.5):
     return parse_scene({
         "grid": {"cell_size": 0.5, "cells": [8, 4]},
         "materials": {"steel": {"type": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}},
         "bodies": [{"shape": "rectangle", "material": "steel", "lower": [1.0, 0.5], "upper": [3.0, 1.5],
                     "velocity": ["0.01 * sin(pi * x / 4)", 0.0]}],
-        "solver": {"end_time": end_time},
+        "solver": {"end_time": end_time, "cfl": cfl},
         # every 0.13 s, about 5.5 steps of 0.0238 s: checkpoints fall between energy checks
         "output": {"checkpoint_interval": 0.13, "directory": str(tmp_path / "out")},
     }, str(tmp_path / "block.toml"))
@@ -85,6 +85,10 @@ def test_failure_keeps_the_newest_healthy_state_apart_and_restart_uses_it(tmp_pa
     assert again.solver.t == t_good and again.solver.step_count == good
     summary = again.execute()
     assert summary["time"] == pytest.approx(0.8, rel=1e-12)
+    # the step rule may change on restart (to continue a diverged run with a smaller step)
+    slower = Run(_scene(tmp_path, cfl=0.25), MPI.COMM_SELF, restart=f"{base}.lastgood.h5", write=False)
+    s = slower.solver
+    assert s.dt == pytest.approx(0.25 * s.grid.h / (s.wave_speed + s.vmax), rel=1e-12)
 
 
 def test_a_nan_in_the_initial_state_saves_no_last_good_state(tmp_path, monkeypatch):
