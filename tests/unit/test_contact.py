@@ -79,9 +79,9 @@ def test_bodies_not_named_share_one_field():
     assert list(slot_of) == [1, 0, 1] and n == 2
     slot_of, n = contact_slots(_scene(three, {"friction": 0.0}))
     assert list(slot_of) == [0, 1, 2] and n == 3
-    twins = TWO + [_block("b", (0.85, 0.1), (0.95, 0.3))]  # a name given twice: a field each
-    scene = _scene(twins, {"friction": 0.0})
-    assert scene.contact.bodies == ("a", "b") and contact_slots(scene)[1] == 3
+    twins = TWO + [_block("b", (0.85, 0.1), (0.95, 0.3))]  # a name given twice is refused
+    with pytest.raises(ConfigError, match="already used"):
+        _scene(twins, {"friction": 0.0})
 
 
 # -- without contact nothing changes ----------------------------------------------------------
