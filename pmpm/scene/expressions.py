@@ -103,8 +103,8 @@ def _check(node):
         return _check(node.operand)
     if isinstance(node, ast.Call):
         if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
-            what = node.func.id if isinstance(node.func, ast.Name) else "this"
-            raise _Refused(f"cannot call {what!r} (allowed: {', '.join(FUNCTIONS)})")
+            what = repr(node.func.id) if isinstance(node.func, ast.Name) else "anything but a named function"
+            raise _Refused(f"cannot call {what} (allowed: {', '.join(FUNCTIONS)})")
         if node.keywords:
             raise _Refused(f"{node.func.id}() takes no keyword arguments")
         arity = FUNCTIONS[node.func.id][1]

@@ -221,9 +221,27 @@ def _tree(root):
     return out
 
 
-def run_cli(cwd, *args, timeout=TIMEOUT):
-    return subprocess.run([sys.executable, "-m", "pmpm.cli", *args], cwd=cwd, capture_output=True,
-                          timeout=timeout)
+def run_cli(cwd, *args, timeout=TIMEOUT, ranks=0):
+    """``python -m pmpm.cli args`` (``ranks`` > 0: under ``mpirun -n ranks``)."""
+    cmd = [sys.executable, "-m", "pmpm.cli", *args]
+    env = None
+    if ranks:
+        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", "--bind-to", "none"] + cmd
+        env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, timeout=timeout, env=env)
+
+
+def _without_mpirun_report(err):
+    """Standard error without mpirun's own boxed report of a non-zero exit (lines of dashes
+    around it), which is mpirun's, not pmpm's."""
+    keep, boxed = [], False
+    for line in err.splitlines():
+        if set(line.strip()) == {"-"}:
+            boxed = not boxed
+            continue
+        if not boxed:
+            keep.append(line)
+    return keep
 
 
 def assert_promise(proc, code, expected):
@@ -232,14 +250,19 @@ def assert_promise(proc, code, expected):
     out = proc.stdout.decode("utf-8", "replace")
     assert proc.returncode == code, (proc.returncode, out, err)
     assert "Traceback" not in err + out, err + out
-    lines = err.splitlines()
+    lines = _without_mpirun_report(err)
     assert len(lines) == 1, err
     assert lines[0].startswith("pmpm: error: ") and expected in lines[0], lines[0]
     return lines[0]
 
 
-@pytest.mark.parametrize("name", list(CASES))
-def test_bad_input_keeps_the_promise(tmp_path, name):
+#: cases found on every rank at the start of a run: under MPI still one line (rank 0 prints)
+MPI_CASES = ["escape-shell-run", "cells-20000", "overlapping-bodies", "mesh-missing-node",
+             "time-step-above-run"]
+
+
+@pytest.mark.parametrize("name,ranks", [(n, 0) for n in CASES] + [(n, 2) for n in MPI_CASES])
+def test_bad_input_keeps_the_promise(tmp_path, name, ranks):
     edit, files, args, code, expected = CASES[name]
     # three folders deep, so a traversal of up to three levels lands in the watched tree
     work = tmp_path / "a" / "b" / "c"
@@ -253,7 +276,7 @@ def test_bad_input_keeps_the_promise(tmp_path, name):
     for fname, content in files.items():
         (work / fname).write_bytes(content if isinstance(content, bytes) else content.encode())
     before = _tree(tmp_path)
-    line = assert_promise(run_cli(work, case, *args), code, expected)
+    line = assert_promise(run_cli(work, case, *args, ranks=ranks), code, expected)
     assert _tree(tmp_path) == before, "a file was written"
     assert "SECRET" not in line  # an error line never quotes a file's contents
 
@@ -387,7 +410,8 @@ def test_a_fresh_run_never_writes_over_another_scene_files(tmp_path, finished_ru
 
 # -- a full disk -------------------------------------------------------------------------------
 
-def test_full_disk_stops_with_one_line_naming_the_file(tmp_path):
+@pytest.mark.parametrize("ranks", [0, 2])
+def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
     if os.geteuid() != 0:
         pytest.skip("mounting a small tmpfs needs root")
     disk = tmp_path / "disk"
@@ -403,8 +427,8 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path):
                  .replace("end_time = 0.01", "end_time = 0.5")
                  + '\n[output]\ndirectory = "disk/out"\ninterval = 0.005\ncheckpoint_interval = 0.02\n')
         (tmp_path / "case.toml").write_text(scene)
-        proc = run_cli(tmp_path, "case.toml", "--no-plots", timeout=300)
-        line = assert_promise(proc, EXIT_WRITE_FAILED, "disk/out/case")
+        proc = run_cli(tmp_path, "case.toml", "--no-plots", timeout=300, ranks=ranks)
+        line = assert_promise(proc, EXIT_WRITE_FAILED, "disk/out/case")  # every rank stopped
         assert "No space left on device" in line, line
         complete = []
         for k in (0, 1):  # the checkpoints written before the disk filled are whole
