@@ -186,6 +186,7 @@ class Run:
                 short = exc.strerror or type(exc).__name__
         short = self.comm.bcast(short)
         if short:
+            self._drop_output()  # closed while the 64 KB margin still holds its metadata
             raise OutputWriteError(path, short)
 
     def _row_bytes(self, names):
