@@ -4,6 +4,8 @@ Files
 -----
 ``<path_base>.ckpt0.h5`` and ``<path_base>.ckpt1.h5``.  Each write replaces the
 older (or an incomplete) one, so a crash while writing leaves the other intact.
+``<path_base>.lastgood.h5`` (:func:`lastgood_path`, written with ``path=``) holds the
+last good state of a failed run and is never one of the two.
 
 Layout of one checkpoint
 ------------------------
@@ -12,8 +14,11 @@ Layout of one checkpoint
     ids that no longer exist hold NaN / -1 (``/particles/id`` is -1 there).
 Root attributes
     ``time``, ``step``, ``n_total``, ``layout`` (``"pmpm-checkpoint-1"``), ``attrs``
-    (JSON of the caller's dict plus time, step and n_total) and ``complete``, set to
-    True last, after a flush, so a file without it was cut short.
+    (JSON of the caller's dict plus time, step and n_total; pmpm's run adds the scene
+    record and fingerprint that ``--restart`` compares, see pmpm.scene.fingerprint) and
+    ``complete``, set to True last, after a flush, so a file without it was cut short.
+    A write that fails (full disk) raises :class:`pmpm.errors.OutputWriteError` on every
+    rank and leaves the other file as it was.
 
 Rows are put into id order with the same one-Alltoallv redistribution as the results
 file, and each rank writes its id block; reading gives rank ``r`` the id block
