@@ -86,7 +86,25 @@ def _size(b):
 
 
 def check_memory(scene, n_ranks=1, ranks_on_node=1, state_floats=0, available=None):
-    """Refuse (ConfigError naming ``grid.cells``) a scene one rank cannot hold in memory."""
+    """Refuse (ConfigError naming ``grid.cells``) a scene one rank cannot hold in memory.
+
+    Parameters
+    ----------
+    scene : Scene
+    n_ranks : int or float
+        Ranks sharing the grid and particles (``math.inf``: what no rank count shrinks).
+    ranks_on_node : int
+        Ranks sharing this machine's memory.
+    state_floats : int
+        Floats of material state per particle.
+    available : float, optional
+        Bytes available on the machine (default: ``MemAvailable``).
+
+    Returns
+    -------
+    float
+        The estimate in bytes.
+    """
     window, particles = estimate_bytes(scene, n_ranks, state_floats)
     need = window + particles
     avail = available_bytes() if available is None else available

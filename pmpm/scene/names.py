@@ -25,7 +25,24 @@ _RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)),
 
 
 def check_name(name, key, what="name", also_reserved=()):
-    """Refuse ``name`` unless it follows the file-name rule; ``key`` names it in the error."""
+    """Refuse ``name`` unless it follows the file-name rule.
+
+    Parameters
+    ----------
+    name : str
+        The name (scene stem, variant, track).
+    key : str
+        Dotted key (or file) the error names.
+    what : str
+        What the name is, for the reason.
+    also_reserved : tuple of str
+        Further names refused (lower case), e.g. ``("time",)`` for tracks.
+
+    Returns
+    -------
+    str
+        ``name``, unchanged.
+    """
     if not isinstance(name, str) or not name:
         raise ConfigError(key, f"{what} must not be empty")
     if not NAME_PATTERN.fullmatch(name):
@@ -71,7 +88,18 @@ def run_files(scene):
 
 
 def check_output_files(scenes):
-    """Refuse two names giving the same file and files outside ``output.directory``."""
+    """Refuse two names giving the same file and files outside ``output.directory``.
+
+    Parameters
+    ----------
+    scenes : list of Scene
+        Every run of one scene file (its variants).
+
+    Raises
+    ------
+    ConfigError
+        Naming the key of the second name that gives a file, or that leaves the directory.
+    """
     seen = {}
     for scene in scenes:
         directory = os.path.realpath(scene.output.directory)
