@@ -762,7 +762,7 @@ def load_scene(path, variant=None):
         if not isinstance(variants, dict):
             raise ConfigError("variants", "must be tables [variants.<name>]")
         for name in variants:
-            check_name(name, f"variants.{name}", "variant name")
+            check_name(name, "variants", "variant name")  # the key holds no raw name (may hold /)
         names = [variant] if variant else list(variants)
         scenes = []
         for name in names:

@@ -117,7 +117,7 @@ CASES = {
     "velocity-not-list": (sub("velocity = [0.1, 0.0]", "velocity = 0.1"), {}, ["--check"], 2, "bodies[0].velocity"),
     # 2. names that become file names
     "variant-traversal": (add('[variants."/../../../escaped"]\n"solver.cfl" = 0.4'), {}, [], 2,
-                          "variants./../../../escaped: variant name"),
+                          "case.toml: variants: variant name '/../../../escaped'"),
     "variant-parent": (add('[variants."../victim"]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "variant name"),
     "variant-empty": (add('[variants.""]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "must not be empty"),
     "variant-reserved": (add('[variants.CON]\n"solver.cfl" = 0.4'), {}, ["--check"], 2, "reserved name"),
