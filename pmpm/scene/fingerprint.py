@@ -20,6 +20,7 @@ CHANGEABLE_ON_RESTART = (
     "solver.cfl", "solver.time_step", "solver.allow_unstable_time_step",
     "output.directory", "output.interval", "output.history_interval",
     "output.checkpoint_interval", "output.progress_interval", "output.deformed_plot",
+    "output.hysteresis",
     "parallel.",
 )
 
