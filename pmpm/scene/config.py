@@ -378,7 +378,10 @@ def _boundaries(root, reactions=False):
 def _check_file_name(name, key):
     """Refuse a name that cannot be used as (part of) a file name: the one rule of
     pmpm.scene.names (sections, reactions, like tracks and variants)."""
-    check_name(name, key, "name")
+    try:
+        check_name(name, key, "name")
+    except ConfigError as exc:
+        raise ConfigError(key, f"{name!r} is not a valid file name ({exc.reason})") from None
 
 
 def _segment(t, name):
