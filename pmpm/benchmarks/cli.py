@@ -51,14 +51,18 @@ def add_bench_parser(sub):
     s.add_argument("--ppc", type=_positive, default=2,
                    help="particles per cell per direction (more particles on the same grid)")
     pe = bs.add_parser("peer", help="pmpm's cubic MUSL step side by side with a JIT peer (Taichi)")
-    pe.add_argument("--particles", type=int, nargs="+", default=[200_000, 1_000_000])
-    pe.add_argument("--steps", type=int, default=10)
-    pe.add_argument("--repeat", type=int, default=7)
+    pe.add_argument("--particles", type=_positive, nargs="+", default=[200_000, 1_000_000],
+                    help="particle counts of the block (default 200000 1000000)")
+    pe.add_argument("--steps", type=_positive, default=10, help="steps per timed repeat (default 10)")
+    pe.add_argument("--repeat", type=_positive, default=7,
+                    help="timed repeats, pmpm and the peer interleaved (default 7)")
     fc = bs.add_parser("fixedcost", help="per-step fixed cost: small scenes against a large one")
-    fc.add_argument("--particles", type=int, nargs="+", default=[2_000, 7_700, 8_000, 200_000])
-    fc.add_argument("--repeat", type=int, default=7)
+    fc.add_argument("--particles", type=_positive, nargs="+", default=[2_000, 7_700, 8_000, 200_000],
+                    help="particle counts of the blocks, timed round robin (default 2000 7700 8000 200000)")
+    fc.add_argument("--repeat", type=_positive, default=7, help="timed rounds (default 7)")
     fc.add_argument("--work", type=float, default=2e6, help="particle-steps per sample")
-    fc.add_argument("--material", default="elastic", choices=sorted(MATERIALS))
+    fc.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
+                    help="the block's material (default elastic)")
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 
