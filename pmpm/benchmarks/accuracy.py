@@ -621,10 +621,13 @@ def read_csv(path):
     return rows
 
 
-def study(quick=False, outdir="accuracy_results", log=sys.stderr, out=sys.stdout, command=None, from_csv=None,
+def study(quick=False, outdir="accuracy_results", log=None, out=None, command=None, from_csv=None,
           clock="wall_s", cfl=True, cfl_only=False):
     """Run the sweep (and, ``cfl``, the CFL-number sweep; ``cfl_only``: the frame's reference
     and the CFL sweep alone), write the files, print the figures; returns the summary dict (the JSON)."""
+    # the streams of the call, not of the import (a caller may redirect them, as the tests do)
+    log = sys.stderr if log is None else log
+    out = sys.stdout if out is None else out
     from pmpm.benchmarks import accuracy_cfl
     t_study = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
