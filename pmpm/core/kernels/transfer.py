@@ -437,8 +437,8 @@ def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, 
             dvy *= 0.25
             dx[p, 0] = dt * vx
             dx[p, 1] = dt * vy
-            nvx = flip * (v[p, 0] + dvx) + pic * vx
-            nvy = flip * (v[p, 1] + dvy) + pic * vy
+            nvx = pic * vx + flip * (v[p, 0] + dvx)   # FLIP with a PIC blend, as the point kernel
+            nvy = pic * vy + flip * (v[p, 1] + dvy)
             v[p, 0] = nvx
             v[p, 1] = nvy
             speed2 = nvx * nvx + nvy * nvy
