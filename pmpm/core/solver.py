@@ -393,7 +393,7 @@ class Solver:
         return (f"the CPDI domain of particle id {i} at ({x:.4g}, {y:.4g}) reaches beyond its slab's "
                 f"ghost nodes at t = {self.t + self._dt_step:.6g} s (step {self.step_count + 1}): the "
                 f"particle is stretched more than {CPDI_REACH} cells across a slab boundary; run on "
-                f"fewer ranks or finer particles")
+                f"fewer ranks, or with more particles per cell (smaller domains)")
 
     def migrate(self, leaving):
         """Step 11: particles that left the slab move to the neighbour with all their state."""
