@@ -29,7 +29,7 @@ def warm_kernels(verbose=False):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     for solver_class, case, variant in ((Solver, "portal_frame.toml", "elastoplastic"),
                                         (ContactSolver, "disks_contact.toml", None),
-                                        # the B-spline GIMP with neo_hookean and Green-Naghdi
+                                        # CPDI (cubic) with neo_hookean and with Green-Naghdi
                                         (Solver, "hard/cantilever_large_rotation.toml", "neo_hookean_h0.25"),
                                         (Solver, "hard/cantilever_large_rotation.toml", "linear_elastic_h0.25")):
         path = os.path.join(root, "cases", case)

@@ -31,8 +31,8 @@ def add_bench_parser(sub):
                    help="update scheme (default musl)")
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
                    help="material of the block (default elastic)")
-    t.add_argument("--interpolation", default="point", choices=["point", "ugimp", "cpgimp"],
-                   help="point B-splines or the B-spline GIMP (cubic only)")
+    t.add_argument("--interpolation", default="point", choices=["point", "ugimp", "cpgimp", "cpdi"],
+                   help="point B-splines, the B-spline GIMP (cubic only) or CPDI (any --shape)")
     t.add_argument("--track-F", dest="track_F", action="store_true",
                    help="keep the deformation gradient F although the material does not need it")
     t.add_argument("--phases", action="store_true",

@@ -35,6 +35,28 @@ grid. Linear completeness holds in the interior; within l of an edge the weights
 centre of the clamped domain instead of s (a shift of at most l / 2). ``ugimp`` keeps the initial
 half-lengths; ``cpgimp`` stretches each with the diagonal of the strain increment (the domain
 follows the material's stretch along the axes).
+
+CPDI (``solver.interpolation = "cpdi"``, any basis): the convected particle domain
+interpolation CPDI1 of Sadeghirad, Brannon & Burghardt (IJNME 86, 2011, eq. 25-27). A
+particle's domain is the parallelogram spanned by the half-vectors r1 = F (lx, 0) and
+r2 = F (0, ly) (lx, ly the initial half-lengths in cell units, the ``domain`` field that GIMP
+uses too, and F the particle's deformation gradient), with corners
+x_c = x_p - r1 - r2, x_p + r1 - r2, x_p + r1 + r2, x_p - r1 + r2 (c = 1..4). The weight of node
+i is the mean of its basis function N_i (any of the B-splines above) at the corners,
+w_ip = 1/4 sum_c N_i(x_c), and its gradient grad w_ip = sum_c N_i(x_c) g_c with the constant
+per-particle vectors g_1 = -g_3 = a / V, g_2 = -g_4 = b / V, a = (r1y - r2y, r2x - r1x),
+b = (r1y + r2y, -r1x - r2x), V = 4 (r1 x r2) (the domain's area, > 0 while det F > 0). Since
+sum_c x_c (x) g_c = I, the gradient of a linear field is exact, and the weights reproduce
+x_p (the mean of the corners). The transfer kernels therefore treat the corners as four
+sub-points of the basis (``cpdi_corners``): no basis gradient is used. A particle touches the
+union of its corners' supports: 4 x K^2 node visits (64 with cubic B-splines, 16 with linear
+hats). Grid edges: a corner outside the grid is clamped onto it per axis; each corner's basis
+then sums to 1 (the boundary-modified B-splines do on [0, n]), so the partition of unity holds
+for every particle, as for GIMP, and sum_c g_c = 0 keeps the gradients' sum zero; linear
+completeness holds where no corner is clamped. The kernels receive ``(tag, domain, F, escape)``,
+``tag`` the basis's, ``escape`` an int64 array [count, first particle] to which they report a
+corner whose support leaves the rank's grid window (its contribution is dropped; the solver
+stops the run, see ``ghost_width``).
 """
 import math
 
@@ -45,7 +67,9 @@ from numba.extending import overload
 
 __all__ = ["SHAPES", "SHAPE_TAGS", "INTERPOLATIONS", "weights", "particle_weights", "block_weights",
            "block_domain", "stencil", "BLOCK", "linear", "quadratic", "cubic", "cubic_gimp",
-           "block_coordinates", "ghost_width", "min_cells", "shape_argument", "MAX_HALF_LENGTH"]
+           "block_coordinates", "ghost_width", "min_cells", "shape_argument", "MAX_HALF_LENGTH",
+           "GIMP_INTERPOLATIONS", "cpdi_corners", "corner_count", "corner_point", "basis_of",
+           "corner_share", "CPDI_REACH", "is_cpdi"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -80,8 +104,9 @@ def cubic(s, n):
     """Cubic B-splines (the paper's choice): 4 nodes per axis, boundary-modified at the edges.
 
     With c = floor(s) and f = s - c in [0, 1), the weights of nodes c-1 .. c+2 are
-    (1-f)^3/6, (3f^3 - 6f^2 + 4)/6, (-3f^3 + 3f^2 + 3f + 1)/6, f^3/6 (branch-free)."""
-    c = int(math.floor(s))
+    (1-f)^3/6, (3f^3 - 6f^2 + 4)/6, (-3f^3 + 3f^2 + 3f + 1)/6, f^3/6 (branch-free). A point on
+    the far edge (s = n, where CPDI clamps its corners) takes c = n - 1, f = 1: weight 1 on node n."""
+    c = min(int(math.floor(s)), n - 1)
     f = s - c
     e = 1.0 - f
     f2 = f * f
@@ -186,19 +211,36 @@ SHAPE_TAGS = {"linear": (0.0,) * 2, "quadratic": (0.0,) * 3, "cubic": (0.0,) * 4
 
 #: ``solver.interpolation``: point B-splines, or B-spline GIMP with fixed (uGIMP) or stretching
 #: (cpGIMP) particle domains
-INTERPOLATIONS = ("point", "ugimp", "cpgimp")
-#: the shape functions each domain interpolation is defined for
+INTERPOLATIONS = ("point", "ugimp", "cpgimp", "cpdi")
+#: the interpolations of the B-spline GIMP (cubic only); ``cpdi`` takes any basis
+GIMP_INTERPOLATIONS = ("ugimp", "cpgimp")
+#: the shape functions each GIMP interpolation is defined for
 GIMP_SHAPES = ("cubic",)
+#: cells by which a CPDI corner may lie beyond its particle's cell before its support leaves a
+#: slab's window (the ghost width adds it to the basis's)
+CPDI_REACH = 2
 #: the tag of the cubic GIMP (5 nodes per axis); the kernels receive ``(GIMP_TAG, domain)``,
 #: ``domain`` the (N, 2) half-lengths in cell units, a particle field
 GIMP_TAG = (0.0,) * 5
 
 
-def shape_argument(name, interpolation="point", domain=None):
-    """What the transfer kernels take as ``shape``: the point tag, or ``(GIMP_TAG, domain)``."""
+def shape_argument(name, interpolation="point", domain=None, F=None, escape=None):
+    """What the transfer kernels take as ``shape``: the point tag, ``(GIMP_TAG, domain)``, or
+    for CPDI ``(tag, domain, F, escape)`` (``escape``: int64 [count, first particle], see the
+    module docstring; a fresh one when None)."""
     if interpolation == "point":
         return SHAPE_TAGS[name]
+    if interpolation == "cpdi":
+        if escape is None:
+            escape = np.array([0, -1], dtype=np.int64)
+        return (SHAPE_TAGS[name], domain, F, escape)
     return (GIMP_TAG, domain)
+
+
+def is_cpdi(shape):
+    """At compile time: is the numba type of ``shape`` the CPDI tuple (tag, domain, F, escape)?"""
+    return isinstance(shape, types.BaseTuple) and not isinstance(shape, types.UniTuple) \
+        and len(shape) == 4 and isinstance(shape[1], types.Array)
 
 
 def _is_gimp(shape):
@@ -208,14 +250,19 @@ def _is_gimp(shape):
 
 
 def stencil(shape):
-    """Nodes per axis of a particle's support (K)."""
-    return 5 if isinstance(shape[0], tuple) else len(shape)
+    """Nodes per axis of one (sub-)point's support (K; for CPDI each corner's)."""
+    if isinstance(shape[0], tuple):
+        return 5 if len(shape) == 2 else len(shape[0])
+    return len(shape)
 
 
 @overload(stencil)
 def _stencil_overload(shape):
     if _is_gimp(shape):
         return lambda shape: 5
+    if is_cpdi(shape):
+        count = shape[0].count
+        return lambda shape: count
     count = shape.count
     return lambda shape: count
 
@@ -449,17 +496,112 @@ def block_coordinates(x, p0, nq, axis, origin, inv_h, s):
         s[q] = (x[p0 + q, axis] - origin) * inv_h
 
 
+_POINT_GHOSTS = {"linear": 1, "quadratic": 2, "cubic": 2}
+
+
 def ghost_width(name, interpolation="point"):
     """Node columns a slab must borrow from each neighbour for this basis (GIMP: a particle in
-    cell c reaches nodes c-2 .. c+3)."""
+    cell c reaches nodes c-2 .. c+3). CPDI: the basis's width plus ``CPDI_REACH`` cells, the
+    distance a corner may lie beyond its particle's cell (a particle stretched further at a slab
+    boundary stops the run: the kernels report it through the shape's ``escape`` array)."""
+    if interpolation == "cpdi":
+        return _POINT_GHOSTS[name] + CPDI_REACH
     if interpolation != "point":
         return 3
-    return {"linear": 1, "quadratic": 2, "cubic": 2}[name]
+    return _POINT_GHOSTS[name]
 
 
 def min_cells(name, interpolation="point"):
     """Fewest cells per axis for which the boundary modification is well defined (GIMP: the
-    5-node window must fit on the grid)."""
-    if interpolation != "point":
+    5-node window must fit on the grid; CPDI: the basis's)."""
+    if interpolation not in ("point", "cpdi"):
         return 4
     return {"linear": 1, "quadratic": 2, "cubic": 3}[name]
+
+
+# -- CPDI: the corners of the particle domains ------------------------------------------------
+
+@nb.njit(cache=True, inline="always")
+def _onto(v, n):
+    """v clamped onto [0, n] (NaN -> 0: a diverged particle must not index outside the grid)."""
+    v = v if v > 0.0 else 0.0
+    return v if v < n else float(n)
+
+
+@nb.njit(cache=True, inline="always")
+def cpdi_corners(domain, F, p, sx, sy, ncx, ncy):
+    """Particle p's domain corners (cell units, clamped onto the grid; the particle at
+    (sx, sy)) and its gradient vectors: ``(cx1..cx4), (cy1..cy4), ax, ay, bx, by`` with
+    (ax, ay) = a / V = g_1 = -g_3 and (bx, by) = b / V = g_2 = -g_4 (1/cell; see the module
+    docstring). V = 4 r1 x r2; it is 0 only once det F = 0 (NaN then: the F check stops it)."""
+    lx = domain[p, 0]
+    ly = domain[p, 1]
+    r1x = F[p, 0] * lx
+    r1y = F[p, 2] * lx
+    r2x = F[p, 1] * ly
+    r2y = F[p, 3] * ly
+    cross = r1x * r2y - r1y * r2x
+    inv = 0.25 / cross if cross != 0.0 else math.nan
+    cx = (_onto(sx - r1x - r2x, ncx), _onto(sx + r1x - r2x, ncx),
+          _onto(sx + r1x + r2x, ncx), _onto(sx - r1x + r2x, ncx))
+    cy = (_onto(sy - r1y - r2y, ncy), _onto(sy + r1y - r2y, ncy),
+          _onto(sy + r1y + r2y, ncy), _onto(sy - r1y + r2y, ncy))
+    return cx, cy, (r1y - r2y) * inv, (r2x - r1x) * inv, (r1y + r2y) * inv, -(r1x + r2x) * inv
+
+
+# The per-particle kernels (point loads, support marking) visit a particle's sub-points: the
+# particle itself (point, GIMP) or its four corners (CPDI), each weighted by ``corner_share``
+# with the basis ``basis_of(shape)``.
+
+def corner_count(shape):
+    """Sub-points per particle: 4 (CPDI corners) or 1."""
+    return 4 if isinstance(shape[0], tuple) and len(shape) == 4 else 1
+
+
+@overload(corner_count)
+def _corner_count_overload(shape):
+    if is_cpdi(shape):
+        return lambda shape: 4
+    return lambda shape: 1
+
+
+def corner_point(shape, p, sx, sy, c, ncx, ncy):
+    """Sub-point ``c`` of particle p at (sx, sy), cell units: corner c (CPDI) or the particle."""
+    if isinstance(shape[0], tuple) and len(shape) == 4:
+        cx, cy = cpdi_corners(shape[1], shape[2], p, sx, sy, ncx, ncy)[:2]
+        return cx[c], cy[c]
+    return sx, sy
+
+
+@overload(corner_point)
+def _corner_point_overload(shape, p, sx, sy, c, ncx, ncy):
+    if is_cpdi(shape):
+        def corner(shape, p, sx, sy, c, ncx, ncy):
+            cx, cy, _, _, _, _ = cpdi_corners(shape[1], shape[2], p, sx, sy, ncx, ncy)
+            return cx[c], cy[c]
+        return corner
+    return lambda shape, p, sx, sy, c, ncx, ncy: (sx, sy)
+
+
+def basis_of(shape):
+    """The shape argument a sub-point is weighted with: the CPDI basis's tag, else ``shape``."""
+    return shape[0] if isinstance(shape[0], tuple) and len(shape) == 4 else shape
+
+
+@overload(basis_of)
+def _basis_of_overload(shape):
+    if is_cpdi(shape):
+        return lambda shape: shape[0]
+    return lambda shape: shape
+
+
+def corner_share(shape):
+    """Each sub-point's share of its particle: 1/4 (CPDI corners) or 1."""
+    return 0.25 if isinstance(shape[0], tuple) and len(shape) == 4 else 1.0
+
+
+@overload(corner_share)
+def _corner_share_overload(shape):
+    if is_cpdi(shape):
+        return lambda shape: 0.25
+    return lambda shape: 1.0

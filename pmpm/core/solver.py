@@ -28,7 +28,7 @@ from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
 from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
-from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
+from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
 from pmpm.errors import ConfigError
 from pmpm.results.reactions import Reactions
 from pmpm.results.sections import make_cuts
@@ -46,7 +46,8 @@ ENERGY_GROWTH_LIMIT = 0.5
 
 def needs_deformation_gradient(scene, materials):
     """Whether the run keeps the deformation gradient F per particle: a material that needs it
-    (hyperelastic), the Green-Naghdi rate (the rotation of F), or an output field ``F``.
+    (hyperelastic), the Green-Naghdi rate (the rotation of F), CPDI (its particle domains are
+    F times the initial ones), or an output field ``F``.
     Otherwise F is neither stored nor updated (the kernels get None and compile it out).
 
     Parameters
@@ -57,6 +58,7 @@ def needs_deformation_gradient(scene, materials):
     cfg = scene.solver
     return (any(m.needs_deformation_gradient for m in materials)
             or (cfg.large_rotations and cfg.objective_rate == "green_naghdi")
+            or cfg.interpolation == "cpdi"
             or "F" in scene.output.fields)
 
 
@@ -119,6 +121,9 @@ class Solver:
             start_deformation(self.particles)
         if self.interpolation != "point":
             self._add_domains()
+        # CPDI: the kernels count corners whose support leaves the window here ([count, first
+        # particle]); read and reset after every step (``_check_and_next_dt``)
+        self._corner_escape = np.array([0, -1], dtype=np.int64)
         del points
         self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
         self._build_window()
@@ -170,15 +175,17 @@ class Solver:
         """The kernels' ``shape`` for the scene points ``idx`` at the start (set-up only)."""
         domain = (self._initial_domains(points["vol"][idx], points["body"][idx])
                   if self.interpolation != "point" else None)
-        return shape_argument(self.scene.solver.shape_function, self.interpolation, domain)
+        F = np.tile([1.0, 0.0, 0.0, 1.0, 1.0], (len(domain), 1)) if self.interpolation == "cpdi" else None
+        return shape_argument(self.scene.solver.shape_function, self.interpolation, domain, F)
 
     @property
     def shape(self):
         """The ``shape`` argument of the transfer kernels: the point B-spline tag, or the GIMP
         pair (tag, the particles' current domain array: rebuilt since sorting and migration
-        replace the arrays)."""
+        replace the arrays), or the CPDI tuple (tag, domain, F, the step's corner report)."""
+        f = self.particles.fields
         return shape_argument(self.scene.solver.shape_function, self.interpolation,
-                              self.particles.fields.get("domain"))
+                              f.get("domain"), f.get("F"), self._corner_escape)
 
     def _local_speed(self):
         v = self.particles["v"]
@@ -350,10 +357,14 @@ class Solver:
         vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
         bad = self._bad_local + inverted + (0 if math.isfinite(vmax) else 1)
         bad_F, self._first_bad_F = K.check_deformation(self.particles["F"]) if self.keeps_F else (0, -1)
-        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving, bad_F], dtype=np.float64))
+        escaped, self._first_escaped = int(self._corner_escape[0]), int(self._corner_escape[1])
+        self._corner_escape[:] = (0, -1)
+        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving, bad_F, escaped], dtype=np.float64))
         self.vmax = flags[0]
         if flags[4]:
             raise UnstableRunError(self._bad_F_report())
+        if flags[5]:
+            raise UnstableRunError(self._escaped_corner_report())
         return int(flags[1]), int(flags[2]), int(flags[3])
 
     def _bad_F_report(self):
@@ -371,6 +382,18 @@ class Solver:
                 f"not finite (det F = {det:.4g}) at t = {self.t + self._dt_step:.6g} s "
                 f"(step {self.step_count + 1}, dt = {self._dt_step:.3g} s; the stable step is about "
                 f"{self.critical_dt():.3g} s)")
+
+    def _escaped_corner_report(self):
+        """The message of a CPDI particle domain reaching beyond its slab's grid window (the
+        ghost width, pmpm.core.shape.ghost_width): the first such particle of every rank."""
+        p, k = self.particles, self._first_escaped
+        row = (int(p["id"][k]), float(p["x"][k, 0]), float(p["x"][k, 1])) if k >= 0 else None
+        rows = [r for r in self.comm.allgather(row) if r is not None]
+        i, x, y = min(rows)
+        return (f"the CPDI domain of particle id {i} at ({x:.4g}, {y:.4g}) reaches beyond its slab's "
+                f"ghost nodes at t = {self.t + self._dt_step:.6g} s (step {self.step_count + 1}): the "
+                f"particle is stretched more than {CPDI_REACH} cells across a slab boundary; run on "
+                f"fewer ranks, or with more particles per cell (smaller domains)")
 
     def migrate(self, leaving):
         """Step 11: particles that left the slab move to the neighbour with all their state."""

@@ -22,7 +22,7 @@ from pmpm.scene.limits import check_memory, check_time_step
 from pmpm.scene.names import check_name, check_output_directory, check_output_files
 from pmpm.scene.tables import REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
-from pmpm.core.shape import GIMP_SHAPES, INTERPOLATIONS
+from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 
 __all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES"]
 logger = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ class SolverConfig:
     on_particle_exit: str
     max_steps: Optional[int]
     objective_rate: str = "jaumann"   # of the hypoelastic models when large_rotations is on
-    interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp" (pmpm.core.shape)
+    interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp", "cpdi" (pmpm.core.shape)
     max_estimated_steps: int = 10_000_000
     allow_unstable_time_step: bool = False
 
@@ -532,7 +532,7 @@ def _solver(t):
         interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS),
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
         allow_unstable_time_step=t.boolean("allow_unstable_time_step", False))
-    if s.interpolation not in ("point",) and s.shape_function not in GIMP_SHAPES:
+    if s.interpolation in GIMP_INTERPOLATIONS and s.shape_function not in GIMP_SHAPES:
         raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "
                                                    f"{' or '.join(map(repr, GIMP_SHAPES))}, not {s.shape_function!r}")
     t.finish()

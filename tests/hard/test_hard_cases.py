@@ -96,9 +96,9 @@ CONSERVATIVE = ("travelling_block", "sparse_free_surface", "thin_member", "frame
 #: loss(h/2) <= 2^-1/2 loss(h), to allow for the pre-asymptotic range of such coarse scenes.
 CONVERGING = ("impact", "high_cfl")
 #: the cantilever's loss is its inelastic contact with the roller wall at the bottom of the swing
-#: (grid contact removes the normal velocity of the nodes it touches); no closed form bounds it
-#: and a refined grid tears the beam (tried: particles leave the grid at t = 2.03 s), so its
-#: loss is reported only; the swing test below checks the beam comes back
+#: (grid contact removes the normal velocity of the nodes it touches); no closed form bounds it,
+#: so its loss is reported only (its refinement is tests/hard/test_cantilever_convergence.py);
+#: the swing test below checks the beam comes back
 REPORTED_ONLY = ("cantilever_large_rotation",)
 HALF_ORDER = 2 ** -0.5
 

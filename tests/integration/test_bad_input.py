@@ -205,6 +205,10 @@ CASES = {
     "scene-nul-bytes": (lambda t: b"\0" * 64, {}, ["--check"], 2, "case.toml: not valid TOML"),
     "scene-huge": (lambda t: t + "#" * (2 << 20), {}, ["--check"], 2, "not a scene file"),
     "scene-name-space": ("rename:my case.toml", {}, ["--check"], 2, "may hold only"),
+    # 8. combinations pmpm does not support: CPDI's corners in the contact solver's kernels
+    "cpdi-with-contact": (lambda t: sub("end_time = 0.01", 'end_time = 0.01\ninterpolation = "cpdi"')(t)
+                          + "\n[contact]\nfriction = 0.0\n", {}, ["--check"], 2,
+                          "solver.interpolation: the contact solver's kernels use point B-splines only"),
 }
 
 

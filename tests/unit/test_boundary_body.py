@@ -94,7 +94,7 @@ def test_attached_boundary_with_a_box_overlapping_keeps_both():
     (lambda d: d["boundary"][0].update(lower=[0.0, 0.0]), "boundary[0].lower"),
     (lambda d: d["boundary"][0].update(face="front"), "boundary[0].face"),
     (lambda d: d["solver"].update(shape_function="quadratic", interpolation="ugimp"), "solver.interpolation"),
-    (lambda d: d["solver"].update(interpolation="cpdi"), "solver.interpolation"),
+    (lambda d: d["solver"].update(interpolation="cpdi2"), "solver.interpolation"),
 ])
 def test_bad_input_is_one_config_error(change, key):
     data = {

@@ -6,7 +6,7 @@ node", independently of the numba code paths.
 """
 import numpy as np
 
-__all__ = ["bspline_1d", "gimp_1d", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
+__all__ = ["bspline_1d", "gimp_1d", "cpdi_basis_matrix", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
            "g2p_kinematics_reference", "g2p_deformation_reference", "reaction_reference"]
 
 
@@ -68,9 +68,37 @@ def gimp_1d(s, l, n, order=3):
     return W, G
 
 
-def basis_matrix(order, x, origin, h, cells, domain=None):
+def cpdi_basis_matrix(order, x, origin, h, cells, domain, F):
+    """CPDI1 (Sadeghirad, Brannon & Burghardt 2011, eq. 25-27) from the point B-splines at the
+    corners of each particle's parallelogram, r1 = F (lx, 0), r2 = F (0, ly) (``domain`` (P, 2)
+    the half-lengths in cell units, ``F`` (P, 5)), corners x_p -r1-r2, +r1-r2, +r1+r2, -r1+r2,
+    each clamped onto the grid per axis: S_i = 1/4 sum_c N_i(x_c) and
+    grad S_i = [(N_i(x_1) - N_i(x_3)) a + (N_i(x_2) - N_i(x_4)) b] / V,
+    a = (r1y - r2y, r2x - r1x), b = (r1y + r2y, -r1x - r2x), V = 4 |r1 x r2|."""
+    s = (np.asarray(x, dtype=float) - np.asarray(origin, dtype=float)) / h
+    r1 = np.stack([F[:, 0], F[:, 2]], axis=1) * domain[:, :1]
+    r2 = np.stack([F[:, 1], F[:, 3]], axis=1) * domain[:, 1:]
+    N = []
+    for corner in (s - r1 - r2, s + r1 - r2, s + r1 + r2, s - r1 + r2):
+        cx = np.clip(corner[:, 0], 0, cells[0])
+        cy = np.clip(corner[:, 1], 0, cells[1])
+        wx, _ = bspline_1d(order, cx, cells[0])
+        wy, _ = bspline_1d(order, cy, cells[1])
+        N.append(wx[:, :, None] * wy[:, None, :])
+    a = np.stack([r1[:, 1] - r2[:, 1], r2[:, 0] - r1[:, 0]], axis=1)
+    b = np.stack([r1[:, 1] + r2[:, 1], -r1[:, 0] - r2[:, 0]], axis=1)
+    V = 4.0 * np.abs(r1[:, 0] * r2[:, 1] - r1[:, 1] * r2[:, 0])
+    dN = ((N[0] - N[2])[..., None] * a[:, None, None, :]
+          + (N[1] - N[3])[..., None] * b[:, None, None, :]) / (V[:, None, None, None] * h)
+    return 0.25 * (N[0] + N[1] + N[2] + N[3]), dN
+
+
+def basis_matrix(order, x, origin, h, cells, domain=None, F=None):
     """N (P, nx, ny) and grad N (P, nx, ny, 2) on the whole grid; with ``domain`` (P, 2), the
-    particles' half-lengths in cell units, the B-spline GIMP (``gimp_1d``)."""
+    particles' half-lengths in cell units, the B-spline GIMP (``gimp_1d``), or with ``F`` as
+    well, CPDI (``cpdi_basis_matrix``)."""
+    if F is not None:
+        return cpdi_basis_matrix(order, x, origin, h, cells, domain, F)
     sx = (x[:, 0] - origin[0]) / h
     sy = (x[:, 1] - origin[1]) / h
     if domain is None:
@@ -84,9 +112,9 @@ def basis_matrix(order, x, origin, h, cells, domain=None):
     return N, dN
 
 
-def p2g_reference(order, x, m, v, vol, stress, fext, origin, h, cells, domain=None):
+def p2g_reference(order, x, m, v, vol, stress, fext, origin, h, cells, domain=None, F=None):
     """Nodal mass (nx, ny), momentum (nx, ny, 2) and force (nx, ny, 2) by paper eq. 2."""
-    N, dN = basis_matrix(order, x, origin, h, cells, domain)
+    N, dN = basis_matrix(order, x, origin, h, cells, domain, F)
     mass = np.einsum("pij,p->ij", N, m)
     mom = np.einsum("pij,p,pd->ijd", N, m, v)
     sig = np.stack([np.stack([stress[:, 0], stress[:, 2]], -1), np.stack([stress[:, 2], stress[:, 1]], -1)], 1)
@@ -95,9 +123,9 @@ def p2g_reference(order, x, m, v, vol, stress, fext, origin, h, cells, domain=No
     return mass, mom, force
 
 
-def g2p_velocity_reference(order, x, v, vel, dvel, pic, origin, h, cells, domain=None):
+def g2p_velocity_reference(order, x, v, vel, dvel, pic, origin, h, cells, domain=None, F=None):
     """New particle velocities from nodal velocities ``vel`` and changes ``dvel`` (nx, ny, 2)."""
-    N, _ = basis_matrix(order, x, origin, h, cells, domain)
+    N, _ = basis_matrix(order, x, origin, h, cells, domain, F)
     flip = v + np.einsum("pij,ijd->pd", N, dvel)
     return (1 - pic) * flip + pic * np.einsum("pij,ijd->pd", N, vel)
 
@@ -122,14 +150,16 @@ def g2p_kinematics_reference(order, x, vol, vel, dx, dt, origin, h, cells):
     return de, dw, vol * (1.0 + de[:, 0] + de[:, 1]), x + dx
 
 
-def g2p_deformation_reference(order, x, vel, F, vol0, dt, origin, h, cells):
+def g2p_deformation_reference(order, x, vel, F, vol0, dt, origin, h, cells, domain=None):
     """The kinematics of the step from nodal velocities ``vel`` (nx, ny, 2), written from the
     equations as matrices: L = sum_i v_i (x) grad N_i, de = sym(L) dt (Voigt, engineering
     shear), spin dw = skew(L)_yx dt, F <- (I + dt L) F (the 2x2 block of ``F`` (P, 5); Fzz
     unchanged), vol = vol0 det F, and the change of the polar angle of F, dtheta, from the
     rotation R of F = R U found by an eigen-decomposition of U^2 = F^T F (independent of the
-    kernel's closed form). Returns de (P, 3), dw (P,), F (P, 5), vol (P,), dtheta (P,)."""
-    _, dN = basis_matrix(order, x, origin, h, cells)
+    kernel's closed form). Returns de (P, 3), dw (P,), F (P, 5), vol (P,), dtheta (P,).
+    With ``domain`` (P, 2, cell units) the gradient is CPDI's, from the corners of F's
+    parallelograms (``cpdi_basis_matrix``)."""
+    _, dN = basis_matrix(order, x, origin, h, cells, domain, F if domain is not None else None)
     L = np.einsum("ijd,pije->pde", vel, dN)          # L[p, d, e] = d v_d / d x_e
     de = np.stack([L[:, 0, 0], L[:, 1, 1], L[:, 0, 1] + L[:, 1, 0]], axis=1) * dt
     dw = 0.5 * (L[:, 1, 0] - L[:, 0, 1]) * dt

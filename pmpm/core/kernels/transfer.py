@@ -8,13 +8,24 @@ The particles go in blocks of ``BLOCK``: a block's weights are evaluated togethe
 pmpm/core/shape.py), then each particle of the block does its scatter or gather from them. The
 weight of node (I0[q] + a, J0[q] + b) is WX[a, q] * WY[b, q], its gradient in cell units
 (WX[K + a, q] * WY[b, q], WX[a, q] * WY[K + b, q]).
+
+CPDI (``shape`` the tuple (tag, domain, F, escape), pmpm/core/shape.py) has kernels of its own,
+chosen by the type of ``shape`` when numba compiles ``p2g``, ``g2p_velocity`` and
+``g2p_kinematics`` (the other scenes' machine code is unchanged): a block's four corners are
+evaluated as sub-points of the basis, and each particle scatters m/4, m v/4 and
+f_c = -V sigma g_c + f_ext/4 at each corner with the corner's weights, gathers the mean of the
+corners' velocities and L = sum_c v(x_c) (x) g_c. A corner whose support leaves the rank's
+window is dropped (nothing is written outside it) and counted in ``escape``.
 """
 import math
 
 import numba as nb
 import numpy as np
 
-from pmpm.core.shape import BLOCK, block_coordinates, block_domain, block_weights, stencil
+from numba.extending import overload
+
+from pmpm.core.shape import (BLOCK, block_coordinates, block_domain, block_weights, cpdi_corners,
+                             is_cpdi, stencil)
 
 __all__ = ["p2g", "g2p_velocity", "g2p_kinematics"]
 
@@ -132,9 +143,8 @@ def _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
     block_weights(shape, s, L, nq, ncy, J0, WY)
 
 
-@nb.njit(cache=True)
-def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
-        G, ox, oy, origin, inv_h, ncx, ncy, shape):
+def _p2g_point(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+               G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Scatter mass and momentum (``v`` not None), internal force (``stress`` not None) and
     external force (``gravity``/``load_id`` not None) into the grid window ``G``."""
     with_force = stress is not None or gravity is not None or load_id is not None
@@ -181,8 +191,7 @@ def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                         G[ii, jj, 4] += fny
 
 
-@nb.njit(cache=True)
-def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+def _g2p_velocity_point(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
     """Update particle velocities from the grid (FLIP with a PIC blend, paper eq. 5) and, when
     ``remap`` is True, scatter the new particle momentum into fields 5, 6 (MUSL, paper eq. 6).
     ``dx`` (N, 2) receives each particle's move dt sum N_i v_i (eq. 5); it is applied later,
@@ -240,10 +249,9 @@ def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap,
     return vmax2 ** 0.5, bad
 
 
-@nb.njit(cache=True)
-def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
-                   gravity, load_id, load_w, load_vec,
-                   G, ox, oy, origin, inv_h, ncx, ncy, shape):
+def _g2p_kinematics_point(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                          gravity, load_id, load_w, load_vec,
+                          G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Strain increment from the grid velocity in ``vel_field`` (paper eq. 6), volume update,
     and (``dx`` not None) the position update x += dx computed by g2p_velocity (eq. 5).
 
@@ -284,3 +292,275 @@ def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
             if dx is not None:
                 work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
     return work
+
+
+# -- CPDI: four corners per particle ----------------------------------------------------------
+
+@nb.njit(cache=True, inline="always")
+def _cpdi_buffers(tag):
+    """Per-block scratch of CPDI: corner coordinates C[c, axis, q], first nodes I0[c, q],
+    J0[c, q], weights/derivatives WX[c], WY[c] of each corner, and the gradient vectors
+    GV[0..3, q] = (ax, ay, bx, by) of each particle."""
+    k2 = 2 * stencil(tag)
+    return (np.empty((4, 2, BLOCK)), np.empty((4, BLOCK), np.int64), np.empty((4, BLOCK), np.int64),
+            np.empty((4, k2, BLOCK)), np.empty((4, k2, BLOCK)), np.empty((4, BLOCK)))
+
+
+@nb.njit(cache=True, inline="always")
+def _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV):
+    """Corners, their basis weights and the gradient vectors of particles p0 .. p0 + nq - 1.
+    A corner whose support leaves the window (nwx x nwy nodes from (ox, oy)) gets zero weights
+    on nodes inside it and is counted in ``escape`` (shape[3]: [count, first particle])."""
+    tag, domain, F, escape = shape[0], shape[1], shape[2], shape[3]
+    for q in range(nq):
+        p = p0 + q
+        cx, cy, ax, ay, bx, by = cpdi_corners(domain, F, p, (x[p, 0] - origin[0]) * inv_h,
+                                              (x[p, 1] - origin[1]) * inv_h, ncx, ncy)
+        for c in range(4):
+            C[c, 0, q] = cx[c]
+            C[c, 1, q] = cy[c]
+        GV[0, q] = ax
+        GV[1, q] = ay
+        GV[2, q] = bx
+        GV[3, q] = by
+    for c in range(4):
+        # the basis's block weights take the corners as points (their L argument is unused)
+        block_weights(tag, C[c, 0], C[c, 0], nq, ncx, I0[c], WX[c])
+        block_weights(tag, C[c, 1], C[c, 1], nq, ncy, J0[c], WY[c])
+    K = stencil(tag)
+    for c in range(4):
+        for q in range(nq):
+            if I0[c, q] < ox or I0[c, q] + K > ox + nwx or J0[c, q] < oy or J0[c, q] + K > oy + nwy:
+                I0[c, q] = ox
+                J0[c, q] = oy
+                for k in range(2 * K):
+                    WX[c, k, q] = 0.0
+                    WY[c, k, q] = 0.0
+                escape[0] += 1
+                if escape[1] < 0:
+                    escape[1] = p0 + q
+
+
+@nb.njit(cache=True, inline="always")
+def _corner_vector(GV, q, c):
+    """g_c of particle q of the block: g_1 = a/V, g_2 = b/V, g_3 = -g_1, g_4 = -g_2 (c = 0..3)."""
+    sign = 1.0 if c < 2 else -1.0
+    k = 2 * (c % 2)
+    return sign * GV[k, q], sign * GV[k + 1, q]
+
+
+def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+              G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    """CPDI ``p2g``: at each corner m/4, m v/4 and f_c = -V sigma g_c + f_ext / 4."""
+    with_force = stress is not None or gravity is not None or load_id is not None
+    tag = shape[0]
+    K = stencil(tag)
+    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    nwx, nwy = G.shape[0], G.shape[1]
+    n = x.shape[0]
+    for p0 in range(0, n, BLOCK):
+        nq = min(BLOCK, n - p0)
+        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+        for q in range(nq):
+            p = p0 + q
+            mp = 0.25 * m[p]
+            mvx = 0.0
+            mvy = 0.0
+            if v is not None:
+                mvx = mp * v[p, 0]
+                mvy = mp * v[p, 1]
+            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+            fx *= 0.25
+            fy *= 0.25
+            c0 = 0.0
+            sxx = 0.0
+            syy = 0.0
+            sxy = 0.0
+            if stress is not None:
+                c0 = -vol[p] * inv_h   # g_c in 1/cell times 1/h
+                sxx = c0 * stress[p, 0]
+                syy = c0 * stress[p, 1]
+                sxy = c0 * stress[p, 2]
+            for c in range(4):
+                gx, gy = _corner_vector(GV, q, c)
+                fcx = fx + sxx * gx + sxy * gy
+                fcy = fy + sxy * gx + syy * gy
+                for a in range(K):
+                    ii = I0[c, q] + a - ox
+                    wa = WX[c, a, q]
+                    for b in range(K):
+                        jj = J0[c, q] + b - oy
+                        w = wa * WY[c, b, q]
+                        if v is not None:
+                            G[ii, jj, 0] += w * mp
+                            G[ii, jj, 1] += w * mvx
+                            G[ii, jj, 2] += w * mvy
+                        if with_force:
+                            G[ii, jj, 3] += w * fcx
+                            G[ii, jj, 4] += w * fcy
+
+
+def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+    """CPDI ``g2p_velocity``: the mean of the corners' grid velocities (and changes); the MUSL
+    re-map scatters m v / 4 at each corner."""
+    vmax2 = 0.0
+    bad = 0
+    flip = 1.0 - pic
+    tag = shape[0]
+    K = stencil(tag)
+    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    nwx, nwy = G.shape[0], G.shape[1]
+    n = x.shape[0]
+    for p0 in range(0, n, BLOCK):
+        nq = min(BLOCK, n - p0)
+        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+        for q in range(nq):
+            p = p0 + q
+            dvx = 0.0
+            dvy = 0.0
+            vx = 0.0
+            vy = 0.0
+            for c in range(4):
+                for a in range(K):
+                    ii = I0[c, q] + a - ox
+                    wa = WX[c, a, q]
+                    for b in range(K):
+                        jj = J0[c, q] + b - oy
+                        w = wa * WY[c, b, q]
+                        vx += w * G[ii, jj, 1]
+                        vy += w * G[ii, jj, 2]
+                        dvx += w * G[ii, jj, 3]
+                        dvy += w * G[ii, jj, 4]
+            vx *= 0.25
+            vy *= 0.25
+            dvx *= 0.25
+            dvy *= 0.25
+            dx[p, 0] = dt * vx
+            dx[p, 1] = dt * vy
+            nvx = pic * vx + flip * (v[p, 0] + dvx)   # FLIP with a PIC blend, as the point kernel
+            nvy = pic * vy + flip * (v[p, 1] + dvy)
+            v[p, 0] = nvx
+            v[p, 1] = nvy
+            speed2 = nvx * nvx + nvy * nvy
+            if speed2 > vmax2:
+                vmax2 = speed2
+            elif not speed2 < 1e300:  # NaN or inf
+                bad += 1
+            if remap:
+                mvx = 0.25 * m[p] * nvx
+                mvy = 0.25 * m[p] * nvy
+                for c in range(4):
+                    for a in range(K):
+                        ii = I0[c, q] + a - ox
+                        wa = WX[c, a, q]
+                        for b in range(K):
+                            jj = J0[c, q] + b - oy
+                            w = wa * WY[c, b, q]
+                            G[ii, jj, 5] += w * mvx
+                            G[ii, jj, 6] += w * mvy
+    return vmax2 ** 0.5, bad
+
+
+def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                         gravity, load_id, load_w, load_vec,
+                         G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    """CPDI ``g2p_kinematics``: L = sum_c v(x_c) (x) g_c, then as the point kernel. The block's
+    corners come from F before this step's update (every transfer of the step uses them)."""
+    work = 0.0
+    tag = shape[0]
+    K = stencil(tag)
+    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    nwx, nwy = G.shape[0], G.shape[1]
+    n = x.shape[0]
+    for p0 in range(0, n, BLOCK):
+        nq = min(BLOCK, n - p0)
+        if de is not None:
+            _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+        for q in range(nq):
+            p = p0 + q
+            if de is not None:
+                lxx = 0.0
+                lxy = 0.0
+                lyx = 0.0
+                lyy = 0.0
+                for c in range(4):
+                    gx, gy = _corner_vector(GV, q, c)
+                    ux = 0.0   # v(x_c), the corner's interpolated velocity
+                    uy = 0.0
+                    for a in range(K):
+                        ii = I0[c, q] + a - ox
+                        wa = WX[c, a, q]
+                        for b in range(K):
+                            jj = J0[c, q] + b - oy
+                            w = wa * WY[c, b, q]
+                            ux += w * G[ii, jj, vel_field]
+                            uy += w * G[ii, jj, vel_field + 1]
+                    lxx += ux * gx
+                    lxy += ux * gy
+                    lyx += uy * gx
+                    lyy += uy * gy
+                strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
+            if dx is not None:
+                work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
+    return work
+
+
+# -- the kernels: the point/GIMP or the CPDI implementation, chosen by the type of ``shape`` --
+
+def _p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+         G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    raise NotImplementedError  # only called from jitted code (the overload below)
+
+
+@overload(_p2g)
+def _p2g_overload(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+                  G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    return _p2g_cpdi if is_cpdi(shape) else _p2g_point
+
+
+def _g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+    raise NotImplementedError
+
+
+@overload(_g2p_velocity)
+def _g2p_velocity_overload(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+    return _g2p_velocity_cpdi if is_cpdi(shape) else _g2p_velocity_point
+
+
+def _g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                    gravity, load_id, load_w, load_vec,
+                    G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    raise NotImplementedError
+
+
+@overload(_g2p_kinematics)
+def _g2p_kinematics_overload(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                             gravity, load_id, load_w, load_vec,
+                             G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    return _g2p_kinematics_cpdi if is_cpdi(shape) else _g2p_kinematics_point
+
+
+def p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+        G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    return _p2g(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
+                G, ox, oy, origin, inv_h, ncx, ncy, shape)
+
+
+def g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+    return _g2p_velocity(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt)
+
+
+def g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                   gravity, load_id, load_w, load_vec,
+                   G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    return _g2p_kinematics(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
+                           gravity, load_id, load_w, load_vec,
+                           G, ox, oy, origin, inv_h, ncx, ncy, shape)
+
+
+p2g.__doc__ = _p2g_point.__doc__
+g2p_velocity.__doc__ = _g2p_velocity_point.__doc__
+g2p_kinematics.__doc__ = _g2p_kinematics_point.__doc__
+p2g = nb.njit(cache=True)(p2g)
+g2p_velocity = nb.njit(cache=True)(g2p_velocity)
+g2p_kinematics = nb.njit(cache=True)(g2p_kinematics)
