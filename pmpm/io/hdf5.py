@@ -628,6 +628,21 @@ class OutputFile:
         """
         self.n_energies += self.write_series("energies", row)
 
+    def set_attrs(self, attrs, remove=()):
+        """Set root attributes (rank 0's values) after deleting those named in ``remove``
+        that the file has (a restart's stale ones). Collective."""
+        attrs = self.comm.bcast(dict(attrs) if self.rank == 0 else None)
+
+        def write():
+            for key in remove:
+                if key in self.file.attrs and key not in attrs:
+                    del self.file.attrs[key]
+            for key, value in attrs.items():
+                self.file.attrs[key] = _attr_value(value)
+            self.file.flush()
+
+        self._guarded(write)
+
     def flush(self):
         """Flush the file to disk (collective)."""
         if self._meta and self.file is not None:
