@@ -255,7 +255,9 @@ class Run:
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
                           append=self.restarted_from is not None, truncate_after=self.restarted_from,
-                          track_attrs=self.tracker.attrs())
+                          track_attrs=self.tracker.attrs(),
+                          # the sidecar follows every frame, so a killed run leaves a current one
+                          xdmf=self.path[:-3] + ".xdmf" if "x" in self.scene.output.fields else None)
 
     def _restore(self, path):
         """Continue from ``path``: a results file (its newest checkpoint) or a checkpoint file
@@ -559,7 +561,9 @@ class Run:
         if self.output is not None:
             output, self.output = self.output, None
             self._guard(self.path, output.close)
-            if "x" in self.scene.output.fields:
+            if output.xdmf:
+                pass  # the writer rewrote the sidecar after each frame: it is current
+            elif "x" in self.scene.output.fields:
                 from pmpm.io import write_xdmf
                 self._guard(self.path[:-3] + ".xdmf", lambda: write_xdmf(self.path) if self.rank == 0 else None)
             elif self.rank == 0:
