@@ -434,7 +434,8 @@ class Run:
         out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
         if self.scene.solver.large_rotations:
             rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[self.scene.solver.objective_rate]
-            out.append(f"large rotations ({rate} stress rate)")
+            out.append(f"large rotations ({rate} stress rate)" if s.rotates_stress else
+                       "large rotations: no stress rotation (every material computes its stress from F)")
         if s.keeps_F:
             out.append("deformation gradient F per particle")
         if s.damping is not None:
