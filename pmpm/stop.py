@@ -75,7 +75,7 @@ class StopCheck:
 
     def _record(self, stop, value, threshold, side, sign):
         s = self.solver
-        reason = f"{stop.track} {stop.quantity} = {value:.6g} {sign} {threshold:.6g} at t = {s.t:.6g} s"
+        reason = f"{stop.track} {stop.quantity} = {value:.8g} {sign} {threshold:.8g} at t = {s.t:.6g} s"
         return Stopped(track=stop.track, quantity=stop.quantity, value=float(value),
                        threshold=float(threshold), side=side, time=float(s.t),
                        step=int(s.step_count), reason=reason)

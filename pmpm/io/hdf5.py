@@ -230,6 +230,7 @@ class OutputFile:
         self.path = os.fspath(path)
         self.xdmf = os.fspath(xdmf) if xdmf is not None and "x" in frame_fields else None
         self._view_specs, self._view_frames = None, []   # the sidecar's frames: (index, time)
+        self._sidecar_cache = {}                           # frame -> its XML (xdmf.write_document)
         self.comm = comm
         self.rank, self.size = comm.Get_rank(), comm.Get_size()
         self.mode = self._resolve_mode(mode)
@@ -566,7 +567,8 @@ class OutputFile:
         """Rewrite the XDMF sidecar for the frames that have views (rank 0)."""
         if self.rank == 0:
             from pmpm.io.xdmf import write_document
-            write_document(self.path, self.xdmf, self.n_total, self._view_specs, self._view_frames)
+            write_document(self.path, self.xdmf, self.n_total, self._view_specs, self._view_frames,
+                           self._sidecar_cache)
 
     def _append_rows(self, group, arrays):
         """Grow every dataset of ``group`` by the rows in ``arrays``; rank 0 writes them."""
