@@ -142,7 +142,8 @@ def run(scene, overrides=None, write=False, variant=None, progress=None, comm=No
     progress : bool or callable, optional
         True shows a progress bar (tqdm's, notebook-aware, when tqdm is installed;
         else a line on stderr); a callable is called as ``progress(t, end_time)``
-        (simulation times, s) a few times a second.
+        (simulation times, s) a few times a second (a run that a ``[[stop]]``
+        ends reports last with ``end_time = t``).
     comm : mpi4py.MPI.Comm, optional
         Ranks that run it (default: every rank); results are complete on rank 0.
     dataframes : bool, optional
@@ -169,7 +170,8 @@ def run(scene, overrides=None, write=False, variant=None, progress=None, comm=No
         r = _collecting_run(sc, comm, write, callback)
         summary = r.execute()
         if callback is not None and r.rank == 0:
-            callback(r.solver.t, sc.solver.end_time)
+            # a run ended by [[stop]] ends before its end time: its last report says t = end
+            callback(r.solver.t, r.solver.t if summary["stopped"] else sc.solver.end_time)
         if write:
             res = load_results(r.path, dataframes=dataframes) if r.rank == 0 else None
         else:

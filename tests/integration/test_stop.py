@@ -135,3 +135,10 @@ def _write(tmp_path):
     path = tmp_path / "case.toml"
     path.write_text(SCENE)
     return path
+
+
+def test_progress_ends_at_the_stop(tmp_path):
+    """A progress callback's last report of a stopped run has t = end (a bar closes)."""
+    calls = []
+    res = pmpm.run(str(_write(tmp_path)), progress=lambda t, end: calls.append((t, end)), dataframes=False)
+    assert calls[-1] == (res.stopped["time"], res.stopped["time"])
