@@ -142,3 +142,24 @@ def test_progress_ends_at_the_stop(tmp_path):
     calls = []
     res = pmpm.run(str(_write(tmp_path)), progress=lambda t, end: calls.append((t, end)), dataframes=False)
     assert calls[-1] == (res.stopped["time"], res.stopped["time"])
+
+
+def test_the_stop_sample_follows_its_particle_when_rows_move(tmp_path):
+    """StopCheck keeps the row of its particle between steps; after the rows are permuted (as a
+    sort or a migration moves them) it must still read that particle: the same values as the
+    history's Tracker, which searches every time."""
+    from mpi4py import MPI
+
+    from pmpm.core.solver import Solver
+    from pmpm.scene.config import load_scene
+    from pmpm.stop import make_stop_check
+    scene = load_scene(str(_write(tmp_path)))[0]
+    s = Solver(scene, MPI.COMM_SELF)
+    check = make_stop_check(scene, s)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        s.step()
+        assert np.array_equal(check.sample(), check.tracker.sample())
+        order = rng.permutation(s.particles.n)
+        s.particles.fields = {k: a[order] for k, a in s.particles.fields.items()}
+        assert np.array_equal(check.sample(), check.tracker.sample())
