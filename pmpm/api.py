@@ -142,7 +142,8 @@ def run(scene, overrides=None, write=False, variant=None, progress=None, comm=No
     progress : bool or callable, optional
         True shows a progress bar (tqdm's, notebook-aware, when tqdm is installed;
         else a line on stderr); a callable is called as ``progress(t, end_time)``
-        (simulation times, s) a few times a second.
+        (simulation times, s) a few times a second (a run that a ``[[stop]]``
+        ends reports last with ``end_time = t``).
     comm : mpi4py.MPI.Comm, optional
         Ranks that run it (default: every rank); results are complete on rank 0.
     dataframes : bool, optional
@@ -169,13 +170,14 @@ def run(scene, overrides=None, write=False, variant=None, progress=None, comm=No
         r = _collecting_run(sc, comm, write, callback)
         summary = r.execute()
         if callback is not None and r.rank == 0:
-            callback(r.solver.t, sc.solver.end_time)
+            # a run ended by [[stop]] ends before its end time: its last report says t = end
+            callback(r.solver.t, r.solver.t if summary["stopped"] else sc.solver.end_time)
         if write:
             res = load_results(r.path, dataframes=dataframes) if r.rank == 0 else None
         else:
             res = _from_memory(r, dataframes) if r.rank == 0 else None
         if res is not None:
-            res.scene, res.summary = sc, summary
+            res.scene, res.summary, res.stopped = sc, summary, summary["stopped"]
         results[sc.variant] = res
     if len(scenes) == 1 and (variant is not None or not scenes[0].variant):
         return results[scenes[0].variant]
@@ -217,7 +219,12 @@ class Result:
     path : str or None
         The results file (None when nothing was written).
     summary : dict or None
-        Steps, end time, wall time, particles, removed particles.
+        Steps, end time, wall time, particles, removed particles, ``end_reason``
+        (``"end_time"``, ``"max_steps"`` or ``"stop"``) and ``stopped`` (below).
+    stopped : dict or None
+        When a ``[[stop]]`` condition ended the run: ``reason`` (the log line's text),
+        ``time`` (s), ``step``, ``track``, ``quantity``, ``value``, ``threshold`` and
+        ``side`` (``"above"`` or ``"below"``); None when it ran to its end.
     histories : dict of str to table
         Per track: columns ``time``, ``ux``, ``uy``, ``vx``, ``vy``, ``x``, ``y``,
         ``sxx``, ``syy``, ``sxy`` (SI units, see docs/output.md).
@@ -240,7 +247,7 @@ class Result:
     """
 
     def __init__(self, histories, track_ids, energies, frame_times, frames, series=None,
-                 path=None, scene=None, summary=None, pandas=None, structural=None):
+                 path=None, scene=None, summary=None, pandas=None, structural=None, stopped=None):
         self.histories, self.track_ids, self.energies = histories, track_ids, energies
         self.frame_times = frame_times
         self._frames = frames
@@ -249,6 +256,7 @@ class Result:
         self.sections = {n: _table(t, pandas) for n, t in structural.get("sections", {}).items()}
         self.reactions = {n: _table(t, pandas) for n, t in structural.get("reactions", {}).items()}
         self.path, self.scene, self.summary = path, scene, summary
+        self.stopped = stopped
         self._pandas = pandas
 
     @property
@@ -354,6 +362,7 @@ def load_results(path, dataframes=None):
         frame_times = f["frames/time"][()]
         complete = np.isfinite(frame_times)
         groups = [n for n, g in f.items() if isinstance(g, h5py.Group) and g.attrs.get("kind") == "series"]
+        stopped = _stop_record(f.attrs)
 
     def frames():
         with h5py.File(path, "r") as f:
@@ -367,4 +376,16 @@ def load_results(path, dataframes=None):
     structural = {kind: {n: {c: t[c] for c in order[kind] if c in t} for n, t in tables.items()}
                   for kind, tables in read_tables(path).items()}
     return Result(_history_tables(times, tracks, columns, pandas), ids, energies, frame_times[complete],
-                  frames, series=series, path=path, pandas=pandas, structural=structural)
+                  frames, series=series, path=path, pandas=pandas, structural=structural,
+                  stopped=stopped)
+
+
+def _stop_record(attrs):
+    """The stop record of a results file's root attributes (``stop_<key>``), or None."""
+    from pmpm.run import STOP_KEYS
+
+    if attrs.get("end_reason") != "stop":
+        return None
+    plain = {k: attrs[f"stop_{k}"] for k in STOP_KEYS}
+    plain = {k: v.item() if isinstance(v, np.generic) else v for k, v in plain.items()}
+    return {k: v.decode() if isinstance(v, bytes) else v for k, v in plain.items()}

@@ -23,6 +23,7 @@ from pmpm import __version__
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.solver import Solver
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
+from pmpm.stop import make_stop_check
 from pmpm.results.recorder import UNITS, StructuralRecorder
 
 __all__ = ["Run", "output_path"]
@@ -131,6 +132,8 @@ class Run:
         if write:
             self._check_own_files()
         self.tracker = Tracker(scene.output.track, self.solver)
+        self.stop_check = make_stop_check(scene, self.solver)  # None without [[stop]]
+        self.stopped = None
         s = self.solver
         self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
         if write and not restart:
@@ -252,7 +255,9 @@ class Run:
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
                           append=self.restarted_from is not None, truncate_after=self.restarted_from,
-                          track_attrs=self.tracker.attrs())
+                          track_attrs=self.tracker.attrs(),
+                          # the sidecar follows every frame, so a killed run leaves a current one
+                          xdmf=self.path[:-3] + ".xdmf" if "x" in self.scene.output.fields else None)
 
     def _restore(self, path):
         """Continue from ``path``: a results file (its newest checkpoint) or a checkpoint file
@@ -429,7 +434,8 @@ class Run:
         out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
         if self.scene.solver.large_rotations:
             rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[self.scene.solver.objective_rate]
-            out.append(f"large rotations ({rate} stress rate)")
+            out.append(f"large rotations ({rate} stress rate)" if s.rotates_stress else
+                       "large rotations: no stress rotation (every material computes its stress from F)")
         if s.keeps_F:
             out.append("deformation gradient F per particle")
         if s.damping is not None:
@@ -462,15 +468,20 @@ class Run:
         wall0 = time.perf_counter()
         last_progress = wall0
         t_start = s.t
+        last_history = -np.inf
         while True:
-            if s.t >= next_history - eps:
+            # the end: end_time reached or a [[stop]] condition met (the final frame and history
+            # row are written at that time, off their schedules)
+            done = s.t >= end - eps or self.stopped is not None
+            if s.t >= next_history - eps or (self.stopped is not None and s.t > last_history + eps):
                 self.record_history()
+                last_history = s.t
                 next_history = _next_multiple(s.t, out.history_interval, eps, False)
-            if s.t >= next_frame - eps or (s.t >= end - eps and s.t > last_frame + eps):
+            if s.t >= next_frame - eps or (done and s.t > last_frame + eps):
                 self.write_frame()
                 last_frame = s.t
                 next_frame = _next_multiple(s.t, out.interval, eps, False)
-            if s.t >= end - eps or (cfg.max_steps and s.step_count >= cfg.max_steps):
+            if done or (cfg.max_steps and s.step_count >= cfg.max_steps):
                 break
             try:
                 if s.t >= next_ckpt - eps:
@@ -482,6 +493,8 @@ class Run:
             except (UnstableRunError, ParticleExitError) as exc:
                 self.fail(exc, snap)
                 raise
+            if self.stop_check is not None:
+                self.stopped = self.stop_check.check()  # collective: the same on every rank
             now = time.perf_counter()
             if out.progress_interval and now - last_progress >= out.progress_interval:
                 last_progress = now
@@ -489,6 +502,12 @@ class Run:
         self._guard(self.path, self.flush_history)
         wall = time.perf_counter() - wall0
         self.progress(wall, t_start)
+        end_reason = "stop" if self.stopped else ("end_time" if s.t >= end - eps else "max_steps")
+        if self.stopped and self.rank == 0:
+            logger.info("stopped: %s", self.stopped.reason)
+        if self.output is not None:
+            self._guard(self.path, self.output.set_attrs, _end_attrs(end_reason, self.stopped),
+                        [f"stop_{k}" for k in STOP_KEYS])
         if out.checkpoint_interval:
             try:
                 self._guard(self.path, self.checkpoint)
@@ -497,7 +516,8 @@ class Run:
                 raise
         self.close()
         summary = {"steps": s.step_count, "time": s.t, "wall": wall, "particles": s.n_total,
-                   "removed": s.removed, "output": self.path if self.write else None}
+                   "removed": s.removed, "output": self.path if self.write else None,
+                   "end_reason": end_reason, "stopped": self.stopped}
         if s.removed and self.rank == 0:  # a global count
             logger.warning("%d particle(s) left the grid and were removed", s.removed)
         return summary
@@ -542,11 +562,26 @@ class Run:
         if self.output is not None:
             output, self.output = self.output, None
             self._guard(self.path, output.close)
-            if "x" in self.scene.output.fields:
+            if output.xdmf:
+                pass  # the writer rewrote the sidecar after each frame: it is current
+            elif "x" in self.scene.output.fields:
                 from pmpm.io import write_xdmf
                 self._guard(self.path[:-3] + ".xdmf", lambda: write_xdmf(self.path) if self.rank == 0 else None)
             elif self.rank == 0:
                 logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")
+
+
+#: the fields of a stop record (pmpm.stop.Stopped), each a root attribute ``stop_<key>``
+STOP_KEYS = ("reason", "time", "step", "track", "quantity", "value", "threshold", "side")
+
+
+def _end_attrs(end_reason, stopped):
+    """Root attributes of how the run ended: ``end_reason`` (``end_time``, ``max_steps`` or
+    ``stop``) and, after a stop, ``stop_<key>`` of its record."""
+    attrs = {"end_reason": end_reason}
+    if stopped:
+        attrs.update({f"stop_{k}": stopped[k] for k in STOP_KEYS})
+    return attrs
 
 
 def _next_multiple(t, interval, eps, include_now):

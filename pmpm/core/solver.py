@@ -116,6 +116,10 @@ class Solver:
         optional = [f for f in scene.output.fields
                     if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
         self.keeps_F = needs_deformation_gradient(scene, self.materials)
+        # the objective rate rotates stresses only a rate-form material integrates: a model that
+        # computes its stress from F (neo-Hookean) overwrites a rotated stress unread
+        self.rotates_stress = cfg.large_rotations and not all(
+            m.stress_from_F and not m.tensor_state_fields for m in self.materials)
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
         if self.keeps_F:
             start_deformation(self.particles)
@@ -271,7 +275,7 @@ class Solver:
         p, cfg = self.particles, self.scene.solver
         de = self._scratch("_de", (p.n, 3))
         dw = dq = None
-        if cfg.large_rotations:
+        if self.rotates_stress:
             if cfg.objective_rate == "green_naghdi":
                 dq = self._scratch("_dq_buf", (p.n, 2))
             else:

@@ -212,6 +212,11 @@ class OutputFile:
         this (rows cut short by a crash are always dropped).
     track_attrs : dict of str to dict, optional
         Extra attributes of each track's dataset, e.g. ``{"tip": {"particle_id": 12}}``.
+    xdmf : str or os.PathLike, optional
+        Keep this XDMF sidecar current: after each frame, add the frame's views
+        (:func:`pmpm.io.xdmf.add_frame_views`, metadata only) and rewrite the sidecar
+        (rank 0), so a run that is killed leaves a sidecar of the frames written so far.
+        Needs ``x`` among the frame fields.
 
     Raises
     ------
@@ -221,8 +226,11 @@ class OutputFile:
 
     def __init__(self, path, comm, attrs, n_total, frame_fields, tracks,
                  history_columns, energy_columns, mode="mpio", append=False,
-                 truncate_after=None, track_attrs=None):
+                 truncate_after=None, track_attrs=None, xdmf=None):
         self.path = os.fspath(path)
+        self.xdmf = os.fspath(xdmf) if xdmf is not None and "x" in frame_fields else None
+        self._view_specs, self._view_frames = None, []   # the sidecar's frames: (index, time)
+        self._sidecar_cache = {}                           # frame -> its XML (xdmf.write_document)
         self.comm = comm
         self.rank, self.size = comm.Get_rank(), comm.Get_size()
         self.mode = self._resolve_mode(mode)
@@ -466,7 +474,11 @@ class OutputFile:
                 if dset.shape[0] != n:
                     dset.resize(n, axis=0)
         if "views" in f:
-            del f["views"]  # they describe the old frames; rebuilt by write_xdmf at the end
+            del f["views"]  # they describe the old frames (rebuilt below, or by write_xdmf)
+        if self.xdmf:
+            times = f["frames/time"][:self.n_frames]
+            for frame in np.flatnonzero(np.isfinite(times)):
+                self._add_views(int(frame), float(times[frame]))
         self._write_root_attrs(attrs)
         restarts = list(f.attrs.get("restart_times", []))
         restarts.append(np.nan if truncate_after is None else float(truncate_after))
@@ -536,8 +548,27 @@ class OutputFile:
             if self.rank == 0:
                 frames["step"][index] = int(step)
                 frames["time"][index] = float(time)
+            if self.xdmf:
+                self._add_views(index, self.comm.bcast(float(time)) if self._driver else float(time))
             self.file.flush()
         self.n_frames = index + 1
+        if self.xdmf:
+            self._guarded(self._refresh_sidecar)
+
+    def _add_views(self, frame, time):
+        """The XDMF views of one frame (every rank that touches the file, same arguments)."""
+        from pmpm.io.xdmf import add_frame_views, view_specs
+        if self._view_specs is None:
+            self._view_specs = view_specs(self.file)
+        add_frame_views(self.file, frame, time, self._view_specs)
+        self._view_frames.append((frame, time))
+
+    def _refresh_sidecar(self):
+        """Rewrite the XDMF sidecar for the frames that have views (rank 0)."""
+        if self.rank == 0:
+            from pmpm.io.xdmf import write_document
+            write_document(self.path, self.xdmf, self.n_total, self._view_specs, self._view_frames,
+                           self._sidecar_cache)
 
     def _append_rows(self, group, arrays):
         """Grow every dataset of ``group`` by the rows in ``arrays``; rank 0 writes them."""
@@ -627,6 +658,21 @@ class OutputFile:
             For an unknown column or columns of different lengths.
         """
         self.n_energies += self.write_series("energies", row)
+
+    def set_attrs(self, attrs, remove=()):
+        """Set root attributes (rank 0's values) after deleting those named in ``remove``
+        that the file has (a restart's stale ones). Collective."""
+        attrs = self.comm.bcast(dict(attrs) if self.rank == 0 else None)
+
+        def write():
+            for key in remove:
+                if key in self.file.attrs and key not in attrs:
+                    del self.file.attrs[key]
+            for key, value in attrs.items():
+                self.file.attrs[key] = _attr_value(value)
+            self.file.flush()
+
+        self._guarded(write)
 
     def flush(self):
         """Flush the file to disk (collective)."""

@@ -24,7 +24,7 @@ from pmpm.scene.tables import REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
 from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 
-__all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES"]
+__all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
 logger = logging.getLogger(__name__)
 
 SHAPE_NAMES = ("linear", "quadratic", "cubic")
@@ -110,6 +110,17 @@ class TrackConfig:
 
 
 @dataclass(frozen=True)
+class StopConfig:
+    """A stop condition (``[[stop]]``, pmpm.stop): the run ends cleanly at the first step after
+    which a tracked point's quantity is above ``above`` or below ``below``."""
+    track: str
+    quantity: str
+    above: Optional[float] = None
+    below: Optional[float] = None
+    after: float = 0.0        # (s) not checked before this time
+
+
+@dataclass(frozen=True)
 class SectionConfig:
     """A section cut (pmpm.results.sections): a segment, or a member and a position on it."""
     name: str
@@ -165,6 +176,7 @@ class Scene:
     output: OutputConfig
     parallel: ParallelConfig
     contact: Optional[ContactConfig] = None
+    stop: tuple = ()          # StopConfig
     variants: dict = field(default_factory=dict)
     variant: str = ""
 
@@ -591,6 +603,32 @@ def _output(t, stem, end_time, state_fields=(), bodies=(), grid=None):
     return out
 
 
+#: what a stop condition can watch: a tracked point's history column, or a magnitude
+STOP_QUANTITIES = ("ux", "uy", "|u|", "vx", "vy", "|v|", "x", "y", "sxx", "syy", "sxy")
+
+
+def _stops(root, tracks):
+    """``[[stop]]``: each names an ``[[output.track]]``, a quantity and a threshold (or two)."""
+    names = [tr.name for tr in tracks]
+    out = []
+    for t in root.tables("stop"):
+        track = t.string("track")
+        if track not in names:
+            raise ConfigError(t.path("track"), f"no [[output.track]] named {track!r}"
+                                               f" (defined: {', '.join(names) or 'none'})")
+        stop = StopConfig(track=track, quantity=t.string("quantity", choices=STOP_QUANTITIES),
+                          above=t.number("above", None), below=t.number("below", None),
+                          after=t.number("after", 0.0, low=0.0))
+        t.finish()
+        if stop.above is None and stop.below is None:
+            raise ConfigError(t.key, "give above or below (or both): the threshold of the quantity")
+        if stop.above is not None and stop.below is not None and not stop.below < stop.above:
+            raise ConfigError(t.path("below"), f"must be below above = {stop.above:g} "
+                                               f"(the run continues while below < quantity < above)")
+        out.append(stop)
+    return tuple(out)
+
+
 def _parallel(t):
     t = t or Table({}, "parallel")
     p = ParallelConfig(axis=t.string("axis", "auto", choices=("auto", "x", "y")),
@@ -657,7 +695,8 @@ def parse_scene(data, path="<scene>"):
                   loads=_loads(root), solver=solver,
                   output=_output(out_table, stem, solver.end_time, state_fields, bodies, grid),
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
-    scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies))
+    scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies),
+                                stop=_stops(root, scene.output.track))
     names = [b.name for b in scene.bodies]
     for k, bc in enumerate(scene.boundaries):
         if bc.body is not None and bc.body not in names:

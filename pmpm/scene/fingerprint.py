@@ -22,6 +22,8 @@ CHANGEABLE_ON_RESTART = (
     "output.checkpoint_interval", "output.progress_interval", "output.deformed_plot",
     "output.hysteresis",
     "parallel.",
+    # a stop condition ends a run like end_time does: a stopped run may continue without it
+    "stop",
 )
 
 

@@ -21,6 +21,7 @@ from mpi4py import MPI
 from pmpm.scene.config import load_scene
 from pmpm.core.solver import Solver
 from pmpm.io.tracking import Tracker
+from pmpm.stop import make_stop_check
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CASES_DIR = os.path.join(ROOT, "cases", "hard")
@@ -60,6 +61,7 @@ class Record:
         self.solver = None
         self.wall = 0.0
         self.error = None
+        self.stopped = None    # the [[stop]] record (pmpm.stop.Stopped) if one ended the run
 
     def finish(self):
         for k in ("t", "dt", "energy", "tracks", "probes"):
@@ -94,7 +96,7 @@ class Record:
 
 
 def run_case(scene, comm=None, probe=None, sample_every=1):
-    """Step ``scene`` on ``comm`` (default COMM_SELF) to its end time, recording the energies, the
+    """Step ``scene`` on ``comm`` (default COMM_SELF) to its end time or its ``[[stop]]``, recording the energies, the
     tracked points and ``probe(solver)`` (collective if it reduces) every ``sample_every`` steps.
     Instability or particle loss is kept in ``record.error``, not raised."""
     comm = comm or MPI.COMM_SELF
@@ -103,22 +105,32 @@ def run_case(scene, comm=None, probe=None, sample_every=1):
     rec.solver = s
     rec.initial_energy = s.initial_energy
     tracker = Tracker(scene.output.track, s)
+    stop = make_stop_check(scene, s)  # the scene's [[stop]], as pmpm.run applies it
     end = scene.solver.end_time
     held = np.zeros(comm.Get_size(), dtype=bool)
+
+    def sample(dt):
+        e = s.energies()
+        rec.t.append(s.t)
+        rec.dt.append(dt)
+        rec.energy.append([e["kinetic"], e["internal_work"], e["external_work"], e["total"], e["strain"]])
+        rec.tracks.append(tracker.sample())
+        if probe is not None:
+            rec.probes.append(probe(s))
+
     t0 = time.perf_counter()
     try:
         while s.t < end - 1e-12 * end:
             held[comm.Get_rank()] |= s.particles.n > 0
             dt = s.step()
-            if s.step_count % sample_every == 0 or s.t >= end - 1e-12 * end:
-                e = s.energies()
-                rec.t.append(s.t)
-                rec.dt.append(dt)
-                rec.energy.append([e["kinetic"], e["internal_work"], e["external_work"], e["total"],
-                                   e["strain"]])
-                rec.tracks.append(tracker.sample())
-                if probe is not None:
-                    rec.probes.append(probe(s))
+            sampled = s.step_count % sample_every == 0 or s.t >= end - 1e-12 * end
+            if sampled:
+                sample(dt)
+            rec.stopped = stop.check() if stop is not None else None
+            if rec.stopped is not None:
+                if not sampled:  # the stop's step is always sampled
+                    sample(dt)
+                break
     except Exception as exc:  # UnstableRunError, ParticleExitError: reported by the checks
         rec.error = exc
     rec.wall = time.perf_counter() - t0

@@ -27,12 +27,28 @@ PROBES = {"sparse_free_surface": lightest_active_node, "travelling_block": body_
           "impact": body_velocities}
 
 
+#: cases run to an earlier cap than their own end time. frame_collapse runs "until its drift
+#: passes 10% of its height or 1 s" (its [[stop]], end_time = 1 s); on its 0.05 m cells the drift
+#: passes 10% only at its second peak, t = 0.091 s, and by 4e-8 m (measured: 0.36580004 m), so a
+#: change far inside the physics' tolerances could take the run to the 1 s cap, about 10 minutes
+#: on one core. The CI run is capped at the issue's comparison time, 0.1 s, instead.
+CI_END_TIME = {"frame_collapse": 0.1}
+
+
+def _ci_scene(name):
+    scene = load(name)
+    if name in CI_END_TIME:
+        import dataclasses
+        scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, end_time=CI_END_TIME[name]))
+    return scene
+
+
 @functools.lru_cache(maxsize=None)
 def record(name):
     """One serial run per case per test session; ``probes[:, 0]`` is the exact work of the loads,
     ``probes[:, 1:]`` the case's own probe."""
     extra = PROBES.get(name, lambda s: [])
-    return run_case(load(name), probe=lambda s: [exact_load_work(s), *np.atleast_1d(extra(s))])
+    return run_case(_ci_scene(name), probe=lambda s: [exact_load_work(s), *np.atleast_1d(extra(s))])
 
 
 # -- the issue's checks, for every case --------------------------------------------------------
@@ -43,7 +59,8 @@ def test_runs_to_its_end_time_with_finite_fields_and_every_particle(name):
     s = rec.solver
     assert rec.error is None, f"{name}: stopped at t = {s.t:.6g} s: {rec.error}"
     end = s.scene.solver.end_time
-    assert abs(s.t - end) <= 1e-9 * end
+    # to its end time, or to its [[stop]] (frame_collapse: the issue's drift criterion)
+    assert abs(s.t - end) <= 1e-9 * end or (s.scene.stop and rec.stopped is not None), f"{name}: t = {s.t}"
     for field, values in s.particles.fields.items():
         if np.issubdtype(values.dtype, np.floating):
             assert np.isfinite(values).all(), f"{name}: non-finite {field}"
@@ -238,24 +255,34 @@ def test_frame_is_loaded_near_its_sway_collapse_load_and_yields():
     assert s.particles["eps_p_eq"].max() > 10 * SIGMA_Y / E_STEEL
 
 
-def test_frame_is_loaded_past_its_sway_collapse_load_and_drifts_past_a_tenth_of_its_height():
+def test_frame_is_loaded_past_its_sway_collapse_load_and_stops_when_its_drift_passes_a_tenth_of_its_height():
     """1.2 P_c with large rotations: above P_c the rigid-plastic frame has no equilibrium and only
     the 5% hardening arrests the sway, near the issue's collapse measure, a drift of 10% of the
-    column height. pmpm has no stop-on-drift condition, so the end time (0.05 s) was chosen from a
-    run. Convergence under refinement is the study pmpm/benchmarks/studies/frame_collapse.py
-    (docs/hard_cases.md): the 0.025 m grid passes 10% at t = 0.045 s."""
+    column height. The scene runs "until its drift passes 10% of its height or 1 s" (its [[stop]]
+    and end_time; CI caps it at 0.1 s, see CI_END_TIME). The drift must come within the issue's
+    3% refinement tolerance of 10% (this 0.05 m grid is the coarse end of that check), and if it
+    passes 10% the run must end at the first step past it. Convergence under refinement is the
+    study pmpm/benchmarks/studies/frame_collapse.py (docs/hard_cases.md)."""
     sys.path.insert(0, os.path.join(ROOT, "tests", "verification"))
     from frame_beam_model import HEIGHT, sway_collapse_load
+    case = load("frame_collapse")
+    assert case.solver.large_rotations and case.solver.end_time == 1.0
     rec = record("frame_collapse")
     s = rec.solver
-    assert s.scene.solver.large_rotations
     applied = s.scene.loads.forces[0].force[0]
     # the scene gives the load to 1e-2 N of 1.26e6 N
     assert abs(applied / sway_collapse_load() - 1.2) < 1e-6
-    drift = rec.track("upper_left_joint")[:, 0]
-    # 10% of the height, less the issue's 3% refinement tolerance on the drift: this 0.05 m grid
-    # is the coarse end of that convergence check (its sway is arrested just short of 10%)
-    assert drift.max() > (1 - 0.03) * 0.1 * HEIGHT, f"largest drift {drift.max():.4g} m by t = {rec.t[-1]:.4g} s"
+    # the stop is the issue's: the loaded joint's drift above 10% of the height (to 1e-12 m)
+    (stop,) = case.stop
+    assert (stop.track, stop.quantity, stop.below) == ("upper_left_joint", "ux", None)
+    assert abs(stop.above - 0.1 * HEIGHT) < 1e-12
+    drift = rec.track("upper_left_joint")[:, 0]  # sampled every step
+    assert drift.max() > (1 - 0.03) * stop.above, f"largest drift {drift.max():.4g} m by t = {rec.t[-1]:.4g} s"
+    if rec.stopped is None:  # capped: never past the threshold
+        assert drift.max() <= stop.above and abs(s.t - CI_END_TIME["frame_collapse"]) < 1e-12
+    else:  # the first step past the threshold ends the run: its drift is above, every earlier one not
+        assert drift[-1] > stop.above >= drift[:-1].max()
+        assert rec.stopped["value"] == drift[-1] and rec.t[-1] == s.t == rec.stopped["time"]
 
 
 def test_high_cfl_runs_at_cfl_0_9():

@@ -78,6 +78,11 @@ def ground(record_name, fmt=None):
                f'[loads.ground_motion]\nfile = "{record_name}"' + (f'\nformat = "{fmt}"' if fmt else ""))
 
 
+def stop(keys, track="tip"):
+    """A tracked point ``tip`` and one ``[[stop]]`` table on it with ``keys``."""
+    return add(f'[[output.track]]\nname = "tip"\npoint = [2.0, 0.5]\n[[stop]]\ntrack = "{track}"\n{keys}')
+
+
 MESH_HEAD = "# vtk DataFile Version 4.2\nmesh\nASCII\nDATASET UNSTRUCTURED_GRID\n"
 MESH_MISSING_NODE = (MESH_HEAD + "POINTS 4 double\n0.5 0.5 0\n1.5 0.5 0\n1.5 1.5 0\n0.5 1.5 0\n"
                      "CELLS 2 8\n3 0 1 2\n3 0 2 9\nCELL_TYPES 2\n5\n5\n")
@@ -197,6 +202,18 @@ CASES = {
     "record-dev-zero": (ground("/dev/zero"), {}, [], 2, "/dev/zero: not a valid two_column acceleration record"),
     "record-not-utf8": (ground("rec.txt"), {"rec.txt": b"0.0 0.1\n\xff\xfe 0.2\n"}, [], 2, "not UTF-8"),
     "record-one-column": (ground("rec.txt"), {"rec.txt": "0.0\n0.01\n"}, [], 2, "expected two columns"),
+    # 6b. stop conditions ([[stop]]): keys, the track they name, the thresholds
+    "stop-unknown-key": (stop('quantity = "ux"\nabove = 0.1\nabov = 1.0'), {}, ["--check"], 2,
+                         "stop[0].abov: unknown key"),
+    "stop-no-such-track": (stop('quantity = "ux"\nabove = 0.1', track="nope"), {}, ["--check"], 2,
+                           "stop[0].track: no [[output.track]] named 'nope'"),
+    "stop-bad-quantity": (stop('quantity = "drift"\nabove = 0.1'), {}, ["--check"], 2,
+                          "stop[0].quantity: must be one of"),
+    "stop-no-threshold": (stop('quantity = "ux"'), {}, ["--check"], 2, "stop[0]: give above or below"),
+    "stop-below-over-above": (stop('quantity = "ux"\nabove = 0.1\nbelow = 0.2'), {}, ["--check"], 2,
+                              "stop[0].below: must be below above"),
+    "stop-threshold-string": (stop('quantity = "|u|"\nabove = "0.1"'), {}, ["--check"], 2,
+                              "stop[0].above: must be a finite number"),
     # 7. the scene file itself
     "scene-stray-ff": (lambda t: t.encode() + b"\n# \xff\n", {}, ["--check"], 2, "case.toml: not UTF-8 text"),
     "scene-utf16-bom": (lambda t: t.encode("utf-16"), {}, ["--check"], 2, "case.toml: not UTF-8 text"),

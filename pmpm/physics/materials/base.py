@@ -82,6 +82,11 @@ class Material:
     #: whether the model reads the deformation gradient (hyperelastic): the run then keeps F
     #: and the solver passes it as ``state["F"]`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz)
     needs_deformation_gradient = False
+    #: whether the model computes the stress from F alone at every step (hyperelastic, objective
+    #: by construction): the objective rate's rotation of the stress before the update would be
+    #: overwritten unread, so the solver skips the rotation (and the spin) when every material
+    #: of the scene is such a model
+    stress_from_F = False
 
     def __init__(self, table, key, formulation):
         if formulation not in self.formulations:

@@ -157,6 +157,7 @@ class NeoHookean(Material):
 
     name = "neo_hookean"
     needs_deformation_gradient = True
+    stress_from_F = True   # no objective-rate rotation of its stress (see the module docs)
 
     def update_stress(self, stress, de, state, mat_ids, which):
         _update_neo_hookean(stress, state["F"], self.params, self.plane_strain, mat_ids, which)

@@ -28,6 +28,13 @@ SAMPLE_EVERY = 5
 #: about a minute on the 2-vCPU machine)
 HANG_TIMEOUT = 600
 
+#: cases compared over a shorter time than their own: frame_collapse runs to its [[stop]] (10%
+#: drift, t = 0.091 s on its 0.05 m cells), which would double this test's time on 3 ranks of
+#: 2 vCPUs (about 200 s); its first 0.05 s (the first drift peak, 9.97%, with its plastic hinges)
+#: compare the same physics step by step. That the stop ends every rank's run at the step of the
+#: serial run is tests/mpi/test_stop_mpi.py; the serial run to the stop, tests/hard/test_hard_cases.py.
+END_TIME = {"frame_collapse": 0.05}
+
 pytestmark = pytest.mark.skipif(comm.size < 2, reason="needs mpirun -n 2 or more (written for 3)")
 
 
@@ -74,6 +81,9 @@ def _compare_with_serial(scene, par, fields):
 @pytest.mark.parametrize("name", CASES)
 def test_same_answer_on_one_and_several_ranks(name):
     scene = load(name)
+    if name in END_TIME:
+        import dataclasses
+        scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, end_time=END_TIME[name]))
     par = run_case(scene, comm, sample_every=SAMPLE_EVERY)
     fields = gather_particles(par.solver)
     migrated = comm.allreduce(int(par.solver.decomp.bytes_sent.get("migration", 0) > 0))
