@@ -77,7 +77,7 @@ class GridWindow:
         Window columns along ``axis`` at the lower and upper end that the halo exchange reads
         or writes (ghost columns and the owned columns a neighbour borrows): always active.
     tile : int
-        Nodes per side of a tile (0: no tiles).
+        Nodes per side of a tile, a power of two (0: no tiles).
     """
 
     def __init__(self, grid, axis, window, reach=None, halo=(0, 0), tile=TILE):
@@ -118,6 +118,9 @@ class GridWindow:
         if not self.tile:
             self.active = self._always = None
             return
+        if self.tile & (self.tile - 1):
+            raise ValueError(f"tile must be a power of two (got {tile})")
+        self._shift = self.tile.bit_length() - 1
         count = (-(-self.shape[0] // self.tile), -(-self.shape[1] // self.tile))
         self.active = np.ones(count, dtype=np.bool_)
         self._always = np.zeros(count, dtype=np.bool_)
@@ -149,4 +152,4 @@ class GridWindow:
         self.active[...] = self._always
         g = self.grid
         mark_tiles(x, g.origin, g.inv_h, self.ox, self.oy, self.shape[0], self.shape[1],
-                   self.reach, self.tile, self.active)
+                   self.reach, self._shift, self.active)

@@ -82,57 +82,47 @@ def grid_update(G, dt, mass_cutoff, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, dam
     reactions = 0.0
     for i in range(i_lo, i_hi):
         for t in range(span_count(tiles, j_lo, j_hi)):
-            a, b = span(tiles, i, j_lo, j_hi, t)
-            for j in range(a, b):
-                dissipated, reactions = _update_node(G, i, j, dt, mass_cutoff, bc_mask, bc_vel,
-                                                     damping, owned, reaction, dissipated, reactions)
-    return dissipated, reactions
-
-
-@nb.njit(cache=True, inline="always")
-def _update_node(G, i, j, dt, mass_cutoff, bc_mask, bc_vel, damping, owned, reaction,
-                 dissipated, reactions):
-    """One node of ``grid_update``; returns the running sums with this node's terms added in
-    the order of the loop over the components (the sums are bit-reproducible)."""
-    mi = G[i, j, 0]
-    if mi <= 0.0:
-        for k in range(1, 5):
-            G[i, j, k] = 0.0
-        return dissipated, reactions
-    inv_m = 1.0 / mi
-    # a node lighter than the cutoff keeps its velocity (a mass-weighted average of its
-    # particles', always well defined) but gets no acceleration: f / m would be huge
-    accelerate = mi > mass_cutoff
-    for d in range(2):
-        v_old = G[i, j, 1 + d] * inv_m
-        v_new = v_old
-        if accelerate:
-            f = G[i, j, 3 + d]
-            if damping is not None:
-                f -= damping * G[i, j, 1 + d]
-            v_new = v_old + f * dt * inv_m
-        k = i if owned[0] == 0 else j
-        mine = owned[1] <= k < owned[2]
-        if bc_mask[i, j, d]:
-            v_free = v_new
-            v_new = bc_vel[i, j, d]
-            if mine:
-                # reaction impulse m (v_bc - v_free) times the support's own velocity:
-                # a support that does not move does no work
-                reactions += mi * (v_new - v_free) * v_new
-                if reaction is not None:
-                    b = reaction[0][i, j, d]
-                    if b >= 0:
-                        impulse = mi * (v_new - v_free)
-                        reaction[1][b, d] += impulse
-                        if d == 0:   # moment z of (Jx, 0) at (x, y): -y Jx
-                            reaction[1][b, 2] -= (reaction[3] + j * reaction[4]) * impulse
-                        else:        # moment z of (0, Jy): x Jy
-                            reaction[1][b, 2] += (reaction[2] + i * reaction[4]) * impulse
-        G[i, j, 1 + d] = v_new
-        G[i, j, 3 + d] = v_new - v_old
-        if damping is not None and mine and accelerate:
-            dissipated += damping * mi * v_old * 0.5 * (v_old + v_new) * dt
+            j_a, j_b = span(tiles, i, j_lo, j_hi, t)
+            for j in range(j_a, j_b):
+                mi = G[i, j, 0]
+                if mi <= 0.0:
+                    for k in range(1, 5):
+                        G[i, j, k] = 0.0
+                    continue
+                inv_m = 1.0 / mi
+                # a node lighter than the cutoff keeps its velocity (a mass-weighted average of its
+                # particles', always well defined) but gets no acceleration: f / m would be huge
+                accelerate = mi > mass_cutoff
+                for d in range(2):
+                    v_old = G[i, j, 1 + d] * inv_m
+                    v_new = v_old
+                    if accelerate:
+                        f = G[i, j, 3 + d]
+                        if damping is not None:
+                            f -= damping * G[i, j, 1 + d]
+                        v_new = v_old + f * dt * inv_m
+                    k = i if owned[0] == 0 else j
+                    mine = owned[1] <= k < owned[2]
+                    if bc_mask[i, j, d]:
+                        v_free = v_new
+                        v_new = bc_vel[i, j, d]
+                        if mine:
+                            # reaction impulse m (v_bc - v_free) times the support's own velocity:
+                            # a support that does not move does no work
+                            reactions += mi * (v_new - v_free) * v_new
+                            if reaction is not None:
+                                b = reaction[0][i, j, d]
+                                if b >= 0:
+                                    impulse = mi * (v_new - v_free)
+                                    reaction[1][b, d] += impulse
+                                    if d == 0:   # moment z of (Jx, 0) at (x, y): -y Jx
+                                        reaction[1][b, 2] -= (reaction[3] + j * reaction[4]) * impulse
+                                    else:        # moment z of (0, Jy): x Jy
+                                        reaction[1][b, 2] += (reaction[2] + i * reaction[4]) * impulse
+                    G[i, j, 1 + d] = v_new
+                    G[i, j, 3 + d] = v_new - v_old
+                    if damping is not None and mine and accelerate:
+                        dissipated += damping * mi * v_old * 0.5 * (v_old + v_new) * dt
     return dissipated, reactions
 
 
@@ -145,8 +135,8 @@ def momentum_to_velocity(G, src, dst, bc_mask, bc_vel, i_lo, i_hi, j_lo, j_hi, t
     velocity instead of its prescribed one: no particle reads it)."""
     for i in range(i_lo, i_hi):
         for t in range(span_count(tiles, j_lo, j_hi)):
-            a, b = span(tiles, i, j_lo, j_hi, t)
-            for j in range(a, b):
+            j_a, j_b = span(tiles, i, j_lo, j_hi, t)
+            for j in range(j_a, j_b):
                 mi = G[i, j, 0]
                 for d in range(2):
                     if bc_mask[i, j, d]:
@@ -172,25 +162,27 @@ def zero_tiles(G, active, tile):
 
 
 @nb.njit(cache=True)
-def mark_tiles(x, origin, inv_h, ox, oy, nx, ny, reach, tile, active):
-    """Set ``active`` for every tile holding a node of some particle's stencil: with c the
-    particle's cell along an axis (window-local), nodes c - reach + 1 .. c + reach (the
-    B-splines' and GIMP's supports, ``reach`` = pmpm.core.shape.ghost_width), clipped to the
-    window's ``nx`` x ``ny`` nodes. ``active`` is not cleared first."""
+def mark_tiles(x, origin, inv_h, ox, oy, nx, ny, reach, shift, active):
+    """Set ``active`` for every tile (2**shift nodes a side) holding a node of some particle's
+    stencil: with c the particle's cell along an axis (window-local), nodes c - reach + 1 ..
+    c + reach (the B-splines' and GIMP's supports, ``reach`` = pmpm.core.shape.ghost_width),
+    clipped to the window's ``nx`` x ``ny`` nodes. ``active`` is not cleared first. A particle
+    in the same cell as the one before it (particles are sorted by cell) adds nothing."""
+    last_x = last_y = -(1 << 62)
     for p in range(x.shape[0]):
         sx = (x[p, 0] - origin[0]) * inv_h
         sy = (x[p, 1] - origin[1]) * inv_h
-        if not (abs(sx) < 1e15 and abs(sy) < 1e15):  # NaN or far away: marks the whole window
+        if not (abs(sx) < 1e15 and abs(sy) < 1e15):  # NaN or far away: the whole window
             active[:, :] = True
             return
         cx = int(math.floor(sx)) - ox
         cy = int(math.floor(sy)) - oy
-        i0 = max(cx - reach + 1, 0)
-        i1 = min(cx + reach, nx - 1)
-        j0 = max(cy - reach + 1, 0)
-        j1 = min(cy + reach, ny - 1)
-        for ti in range(i0 // tile, i1 // tile + 1):
-            for tj in range(j0 // tile, j1 // tile + 1):
+        if cx == last_x and cy == last_y:
+            continue
+        last_x, last_y = cx, cy
+        # shifts, not divisions: an integer division costs more than the rest of the loop
+        for ti in range(max(cx - reach + 1, 0) >> shift, (min(cx + reach, nx - 1) >> shift) + 1):
+            for tj in range(max(cy - reach + 1, 0) >> shift, (min(cy + reach, ny - 1) >> shift) + 1):
                 active[ti, tj] = True
 
 
