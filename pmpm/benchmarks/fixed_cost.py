@@ -24,23 +24,22 @@ from pmpm.benchmarks.block import block_scene
 __all__ = ["fixed_cost", "measure", "fit_fixed_cost", "frame_scene"]
 
 #: the label of the main job's scene in the tables
-FRAME = "portal frame"
+FRAME = "frame"
 
 
-def frame_scene():
-    """The main job's elastic variant (cases/portal_frame.toml) as the benchmark runs it."""
+def frame_scene(variant="elastic"):
+    """A variant of the main job (cases/portal_frame.toml) as the benchmark runs it."""
     from pmpm.benchmarks.accuracy import FRAME_CASE
     from pmpm.scene.config import load_scene
-    return load_scene(FRAME_CASE, "elastic")[0]
+    return load_scene(FRAME_CASE, variant)[0]
 
 
-def _cases(sizes, material, frame, whole_window):
+def _cases(sizes, material, frames, whole_window):
     """(scene label, tiles on, solver) of every case, the blocks first."""
     from mpi4py import MPI
     from pmpm.core.solver import Solver
     scenes = [("block", block_scene(n, material=material)) for n in sizes]
-    if frame:
-        scenes.append((FRAME, frame_scene()))
+    scenes += [(f"{FRAME} {v}", frame_scene(v)) for v in frames]
     cases = []
     for tiles in ((True, False) if whole_window else (True,)):
         for label, scene in scenes:
@@ -51,12 +50,12 @@ def _cases(sizes, material, frame, whole_window):
     return cases
 
 
-def measure(sizes, repeat, work, material="elastic", clock=time.process_time, frame=False,
+def measure(sizes, repeat, work, material="elastic", clock=time.process_time, frames=(),
             whole_window=False):
     """{(scene, particles, tiles on): [CPU seconds per step of each round]} of the block at each
-    of ``sizes`` (and the portal frame with ``frame``; every case also with the tiles off with
-    ``whole_window``)."""
-    cases = _cases(sizes, material, frame, whole_window)
+    of ``sizes`` and the portal frame's ``frames`` variants (every case also with the tiles off
+    with ``whole_window``)."""
+    cases = _cases(sizes, material, frames, whole_window)
     steps = [max(2, int(round(work / s.particles.n))) for _, _, s in cases]
     for (_, _, s), k in zip(cases, steps):  # first touch of the arrays, cache warm
         for _ in range(min(k, 30)):
@@ -97,28 +96,29 @@ def _rows(samples, tiles):
 
 def fixed_cost(args):
     """``pmpm bench fixedcost``: returns the exit code."""
-    frame = not getattr(args, "no_frame", False)
+    frames = getattr(args, "frame", ["elastic"])
     whole = getattr(args, "whole_window", False)
-    samples = measure(args.particles, args.repeat, args.work, args.material, frame=frame,
+    samples = measure(args.particles, args.repeat, args.work, args.material, frames=frames,
                       whole_window=whole)
     print(f"pmpm bench fixedcost: block (cubic MUSL {args.material})"
-          f"{' and the portal frame (elastic, 0.05 m)' if frame else ''}, {args.repeat} rounds, about "
+          f"{' and the portal frame (' + ', '.join(frames) + ', 0.05 m)' if frames else ''}, "
+          f"{args.repeat} rounds, about "
           f"{args.work:.0f} particle-steps per sample, process CPU time, median")
-    print(f"{'scene':>14s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
+    print(f"{'scene':>18s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
           f"{'vs largest block':>17s}")
     summary = {"material": args.material, "repeat": args.repeat, "work": args.work}
     for tiles in ((True, False) if whole else (True,)):
         rows, a, b = _rows(samples, tiles)
         for r in rows:
-            print(f"{r['scene']:>14s} {'on' if tiles else 'off':>6s} {r['particles']:>10d} "
+            print(f"{r['scene']:>18s} {'on' if tiles else 'off':>6s} {r['particles']:>10d} "
                   f"{r['us_per_step']:>10.1f} {r['ns_per_particle_step']:>17.1f} {r['ratio_to_largest']:>17.3f}")
         print(f"fit over the blocks (tiles {'on' if tiles else 'off'}) t = a + b n: fixed cost "
               f"a = {a * 1e6:.1f} us per step, b = {b * 1e9:.1f} ns per particle-step")
         key = "" if tiles else "_whole_window"
         summary.update({"fixed_us_per_step" + key: a * 1e6, "ns_per_particle_step_fit" + key: b * 1e9,
                         "sizes" + key: [r for r in rows if r["scene"] == "block"]})
-        frame_row = [r for r in rows if r["scene"] == FRAME]
-        if frame_row:
-            summary["frame" + key] = frame_row[0]
+        for r in rows:
+            if r["scene"] != "block":
+                summary[r["scene"].replace(" ", "_") + key] = r
     print(json.dumps(summary))
     return 0

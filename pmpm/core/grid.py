@@ -17,12 +17,25 @@ import numpy as np
 from pmpm.core.kernels import N_FIELDS
 from pmpm.core.kernels.grid_ops import mark_tiles, zero_tiles
 
-__all__ = ["Grid", "GridWindow", "TILE"]
+__all__ = ["Grid", "GridWindow", "TILE", "TILE_NODES_PER_PARTICLE", "choose_tile"]
 logger = logging.getLogger(__name__)
 
 #: nodes per side of a tile (docs/performance.md, "Small scenes", compares sizes); smaller
 #: tiles follow a thin member more closely, larger ones cost fewer tile tests
 TILE = 8
+#: tiles only where the window has more than this many nodes per particle: marking the tiles
+#: costs a pass over the particles, skipping a node saves a little, and the two break even at
+#: about 3 nodes per particle on this machine (docs/performance.md, "Small scenes": the portal
+#: frame's window, 1.6 nodes per particle, steps 20-30 us slower with tiles, the same frame in a
+#: grid of 4 times the nodes, 6.3 per particle, 60 us faster); a block has 0.3
+TILE_NODES_PER_PARTICLE = 4.0
+
+
+def choose_tile(nodes, particles):
+    """The tile size for a window of ``nodes`` nodes holding ``particles`` particles: ``TILE``
+    where the window is sparse enough for the tiles to pay (``TILE_NODES_PER_PARTICLE``), else
+    0 (every pass over the whole window). Either way the results are the same to the bit."""
+    return TILE if nodes > TILE_NODES_PER_PARTICLE * max(particles, 1) else 0
 
 
 class Grid:

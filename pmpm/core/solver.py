@@ -21,7 +21,7 @@ from decomposition import alltoallv_fields, get_comm
 from pmpm.core import kernels as K
 from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, face_node_sets
 from pmpm.errors import ParticleExitError, UnstableRunError
-from pmpm.core.grid import Grid, GridWindow
+from pmpm.core.grid import Grid, GridWindow, choose_tile
 from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
@@ -154,6 +154,7 @@ class Solver:
         self.window = GridWindow(self.grid, self.axis, self.decomp.window,
                                  reach=ghost_width(cfg.shape_function, cfg.interpolation),
                                  halo=self._halo_columns())
+        self.window.use_tiles(choose_tile(self.window.G.shape[0] * self.window.G.shape[1], self.particles.n))
         self.window.node_sets = self._node_sets   # body-attached boundaries' global node masks
         apply_boundary_masks(self.window, self.scene.boundaries)
         if self.reactions is not None:

@@ -6,11 +6,14 @@ Against theory: the marked tiles cover every node where the independent NumPy ba
 whole run with tiles equals the same run over the whole window to the bit (the nodes are
 visited in the same order, so every sum adds the same terms in the same order), and every node
 outside the active tiles is zero after each step (a tile that emptied was cleared)."""
+import dataclasses
+
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from pmpm.core import kernels as K
+from pmpm.core.grid import TILE, TILE_NODES_PER_PARTICLE, choose_tile
 from pmpm.core.kernels import grid_ops
 from pmpm.core.kernels.reference import basis_matrix
 from pmpm.core.kernels.reference_tiles import mark_tiles_reference, tile_node_mask, zero_tiles_reference
@@ -170,3 +173,18 @@ def test_a_run_with_tiles_equals_the_whole_window_to_the_bit(shape, scheme, inte
     assert tiled.energies() == whole.energies()
     np.testing.assert_array_equal(tiled.reactions.kernel_arg()[1], whole.reactions.kernel_arg()[1])
     assert np.abs(whole.reactions.kernel_arg()[1]).max() > 0  # the block reached the wall
+
+
+def test_tiles_are_chosen_for_sparse_windows_only():
+    """The solver's choice (pmpm.core.grid.choose_tile): tiles where the window holds more than
+    TILE_NODES_PER_PARTICLE nodes per particle (an empty rank too), the whole window else."""
+    assert choose_tile(10_000, 10_000 / TILE_NODES_PER_PARTICLE - 1) == TILE
+    assert choose_tile(10_000, 10_000 / TILE_NODES_PER_PARTICLE) == 0
+    assert choose_tile(100, 0) == TILE
+    scene = _scene("cubic", "musl", "point")   # 17 x 11 nodes, 48 particles: 3.9 per particle
+    dense = Solver(scene, MPI.COMM_SELF)
+    sparse = Solver(dataclasses.replace(scene, grid=dataclasses.replace(scene.grid, cells=[32, 20])),
+                    MPI.COMM_SELF)             # 33 x 21 nodes: 14 per particle
+    assert dense.particles.n == sparse.particles.n == 48
+    assert dense.window.tile == 0 and dense.window.tiles is None
+    assert sparse.window.tile == TILE and sparse.window.tiles is not None
