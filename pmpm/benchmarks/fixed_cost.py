@@ -9,9 +9,10 @@ cases/portal_frame.toml, about 7,700 particles on 0.05 m cells) in one process, 
 each sample the process CPU time of as many steps as make about ``--work`` particle-steps, and
 prints the median ns per particle-step of each case, its ratio to the largest block's (and the ratio of the fastest rounds), and a and
 b from a least-squares fit of the blocks' median step times. The frame differs from a block of
-its size by its grid: a hollow frame in a 143 x 85 node window, whose node passes run over the
-active tiles only (pmpm.core.grid); ``--whole-window`` also times every case with the tiles off
-(each pass over the whole window, as before the tiles), interleaved with the rest.
+its size by its grid: a hollow frame in a 143 x 85 node window. By default each case runs as the
+solver chooses (tiles "auto": pmpm.core.grid.choose_tile); ``--whole-window`` times every case
+twice instead, interleaved, with tiles ("on": node passes over the active tiles only) and
+without ("off": each pass over the whole window, as before the tiles).
 """
 import json
 import statistics
@@ -20,6 +21,7 @@ import time
 import numpy as np
 
 from pmpm.benchmarks.block import block_scene
+from pmpm.core.grid import TILE
 
 __all__ = ["fixed_cost", "measure", "fit_fixed_cost", "frame_scene"]
 
@@ -41,11 +43,12 @@ def _cases(sizes, material, frames, whole_window):
     scenes = [("block", block_scene(n, material=material)) for n in sizes]
     scenes += [(f"{FRAME} {v}", frame_scene(v)) for v in frames]
     cases = []
-    for tiles in ((True, False) if whole_window else (True,)):
+    for tiles in ((True, False) if whole_window else (None,)):
         for label, scene in scenes:
             s = Solver(scene, MPI.COMM_SELF)
-            if not tiles:
-                s.window.use_tiles(0)
+            s.default_tile = s.window.tile   # what the solver chose (pmpm.core.grid.choose_tile)
+            if whole_window:                 # both ways, whatever the default
+                s.window.use_tiles(TILE if tiles else 0)
             cases.append((label, tiles, s))
     return cases
 
@@ -61,6 +64,8 @@ def measure(sizes, repeat, work, material="elastic", clock=time.process_time, fr
         for _ in range(min(k, 30)):
             s.step()
     samples = {(label, s.particles.n, tiles): [] for label, tiles, s in cases}
+    measure.defaults = {(label, s.particles.n): (s.default_tile, s.window.G.shape[0] * s.window.G.shape[1])
+                        for label, _, s in cases}
     for _ in range(repeat):
         for (label, tiles, s), k in zip(cases, steps):
             t0 = clock()
@@ -109,18 +114,23 @@ def fixed_cost(args):
     print(f"{'scene':>18s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
           f"{'vs largest block':>17s} {'fastest rounds':>15s}")
     summary = {"material": args.material, "repeat": args.repeat, "work": args.work}
-    for tiles in ((True, False) if whole else (True,)):
+    name = {None: "auto", True: "on", False: "off"}
+    for tiles in ((True, False) if whole else (None,)):
         rows, a, b = _rows(samples, tiles)
         for r in rows:
-            print(f"{r['scene']:>18s} {'on' if tiles else 'off':>6s} {r['particles']:>10d} "
+            print(f"{r['scene']:>18s} {name[tiles]:>6s} {r['particles']:>10d} "
                   f"{r['us_per_step']:>10.1f} {r['ns_per_particle_step']:>17.1f} {r['ratio_to_largest']:>17.3f} {r['ratio_of_fastest']:>15.3f}")
-        print(f"fit over the blocks (tiles {'on' if tiles else 'off'}) t = a + b n: fixed cost "
+        print(f"fit over the blocks (tiles {name[tiles]}) t = a + b n: fixed cost "
               f"a = {a * 1e6:.1f} us per step, b = {b * 1e9:.1f} ns per particle-step")
-        key = "" if tiles else "_whole_window"
+        key = "" if tiles is not False else "_whole_window"
         summary.update({"fixed_us_per_step" + key: a * 1e6, "ns_per_particle_step_fit" + key: b * 1e9,
                         "sizes" + key: [r for r in rows if r["scene"] == "block"]})
         for r in rows:
             if r["scene"] != "block":
                 summary[r["scene"].replace(" ", "_") + key] = r
+    for (label, n), (tile, nodes) in measure.defaults.items():
+        print(f"{label} ({n} particles, {nodes} window nodes, {nodes / n:.2f} per particle): the solver's "
+              f"default is {'tiles of ' + str(tile) + ' nodes' if tile else 'the whole window'}")
+    summary["default_tile"] = {f"{label} {n}": tile for (label, n), (tile, _) in measure.defaults.items()}
     print(json.dumps(summary))
     return 0
