@@ -188,3 +188,6 @@ def test_tiles_are_chosen_for_sparse_windows_only():
     assert dense.particles.n == sparse.particles.n == 48
     assert dense.window.tile == 0 and dense.window.tiles is None
     assert sparse.window.tile == TILE and sparse.window.tiles is not None
+    # CPDI's corners are not bounded by the ghost width on one rank: never tiles
+    cpdi = dataclasses.replace(sparse.scene, solver=dataclasses.replace(sparse.scene.solver, interpolation="cpdi"))
+    assert Solver(cpdi, MPI.COMM_SELF).window.tiles is None
