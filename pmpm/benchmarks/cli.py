@@ -63,6 +63,11 @@ def add_bench_parser(sub):
     fc.add_argument("--work", type=float, default=2e6, help="particle-steps per sample")
     fc.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
                     help="the block's material (default elastic)")
+    fc.add_argument("--frame", nargs="*", default=["elastic"], choices=["elastic", "elastoplastic"],
+                    help="variants of the main job's scene (cases/portal_frame.toml, 0.05 m) to time "
+                         "beside the blocks (default elastic; none: --frame with no value)")
+    fc.add_argument("--whole-window", action="store_true",
+                    help="also time every case with the grid tiles off (each node pass over the whole window)")
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 

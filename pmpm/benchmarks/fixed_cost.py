@@ -2,13 +2,17 @@
 
 A step costs a + b n for n particles: ``a`` is what a step costs whatever its size (Python
 orchestration of the phases, the halo exchanges and allreduces, which are no-ops or cheap on one
-rank, the checks, the grid passes over a window that does not shrink with the particles), ``b``
-the particles' share. The benchmark runs the benchmark block (cubic, MUSL, elastic) at several
-particle counts in one process, round robin (each size in turn, ``--repeat`` rounds, so a drift
-of a shared machine hits every size alike), each sample the process CPU time of as many steps
-as make about ``--work`` particle-steps, and prints the median ns per particle-step of each size,
-its ratio to the largest size's, and a and b from a least-squares fit of the median step times.
-The main job (cases/portal_frame.toml) has about 7,700 particles, hence the default sizes.
+rank, the checks), ``b`` the particles' share. The benchmark runs the benchmark block (cubic,
+MUSL, elastic) at several particle counts and the main job's own scene (the elastic variant of
+cases/portal_frame.toml, about 7,700 particles on 0.05 m cells) in one process, round robin
+(each case in turn, ``--repeat`` rounds, so a drift of a shared machine hits every case alike),
+each sample the process CPU time of as many steps as make about ``--work`` particle-steps, and
+prints the median ns per particle-step of each case, its ratio to the largest block's (and the ratio of the fastest rounds), and a and
+b from a least-squares fit of the blocks' median step times. The frame differs from a block of
+its size by its grid: a hollow frame in a 143 x 85 node window. By default each case runs as the
+solver chooses (tiles "auto": pmpm.core.grid.choose_tile); ``--whole-window`` times every case
+twice instead, interleaved, with tiles ("on": node passes over the active tiles only) and
+without ("off": each pass over the whole window, as before the tiles).
 """
 import json
 import statistics
@@ -17,26 +21,57 @@ import time
 import numpy as np
 
 from pmpm.benchmarks.block import block_scene
+from pmpm.core.grid import TILE
 
-__all__ = ["fixed_cost", "measure", "fit_fixed_cost"]
+__all__ = ["fixed_cost", "measure", "fit_fixed_cost", "frame_scene"]
+
+#: the label of the main job's scene in the tables
+FRAME = "frame"
 
 
-def measure(sizes, repeat, work, material="elastic", clock=time.process_time):
-    """{particles: [CPU seconds per step of each round]} of the block at each of ``sizes``."""
+def frame_scene(variant="elastic"):
+    """A variant of the main job (cases/portal_frame.toml) as the benchmark runs it."""
+    from pmpm.benchmarks.accuracy import FRAME_CASE
+    from pmpm.scene.config import load_scene
+    return load_scene(FRAME_CASE, variant)[0]
+
+
+def _cases(sizes, material, frames, whole_window):
+    """(scene label, tiles on, solver) of every case, the blocks first."""
     from mpi4py import MPI
     from pmpm.core.solver import Solver
-    solvers = [Solver(block_scene(n, material=material), MPI.COMM_SELF) for n in sizes]
-    steps = [max(2, int(round(work / s.particles.n))) for s in solvers]
-    for s, k in zip(solvers, steps):  # first touch of the arrays, cache warm
+    scenes = [("block", block_scene(n, material=material)) for n in sizes]
+    scenes += [(f"{FRAME} {v}", frame_scene(v)) for v in frames]
+    cases = []
+    for tiles in ((True, False) if whole_window else (None,)):
+        for label, scene in scenes:
+            s = Solver(scene, MPI.COMM_SELF)
+            s.default_tile = s.window.tile   # what the solver chose (pmpm.core.grid.choose_tile)
+            if whole_window:                 # both ways, whatever the default
+                s.window.use_tiles(TILE if tiles else 0)
+            cases.append((label, tiles, s))
+    return cases
+
+
+def measure(sizes, repeat, work, material="elastic", clock=time.process_time, frames=(),
+            whole_window=False):
+    """{(scene, particles, tiles on): [CPU seconds per step of each round]} of the block at each
+    of ``sizes`` and the portal frame's ``frames`` variants (every case also with the tiles off
+    with ``whole_window``)."""
+    cases = _cases(sizes, material, frames, whole_window)
+    steps = [max(2, int(round(work / s.particles.n))) for _, _, s in cases]
+    for (_, _, s), k in zip(cases, steps):  # first touch of the arrays, cache warm
         for _ in range(min(k, 30)):
             s.step()
-    samples = {s.particles.n: [] for s in solvers}
+    samples = {(label, s.particles.n, tiles): [] for label, tiles, s in cases}
+    measure.defaults = {(label, s.particles.n): (s.default_tile, s.window.G.shape[0] * s.window.G.shape[1])
+                        for label, _, s in cases}
     for _ in range(repeat):
-        for s, k in zip(solvers, steps):
+        for (label, tiles, s), k in zip(cases, steps):
             t0 = clock()
             for _ in range(k):
                 s.step()
-            samples[s.particles.n].append((clock() - t0) / k)
+            samples[label, s.particles.n, tiles].append((clock() - t0) / k)
     return samples
 
 
@@ -46,25 +81,56 @@ def fit_fixed_cost(n, t):
     return float(a), float(b)
 
 
+def _rows(samples, tiles):
+    """Table rows of the cases with ``tiles`` on or off, each against the largest block's."""
+    keys = [k for k in samples if k[2] == tiles]
+    blocks = sorted(k for k in keys if k[0] == "block")
+    ref = blocks[-1]
+    med = {k: statistics.median(samples[k]) for k in keys}
+    ref_ns = med[ref] / ref[1]
+    rows = []
+    for k in blocks + [k for k in keys if k[0] != "block"]:
+        label, n, _ = k
+        per_round = [(x / n) / (y / ref[1]) for x, y in zip(samples[k], samples[ref])]
+        # the fastest rounds' ratio beside the medians': a busy machine only ever adds time
+        fastest = (min(samples[k]) / n) / (min(samples[ref]) / ref[1])
+        rows.append({"scene": label, "particles": n, "tiles": tiles, "us_per_step": med[k] * 1e6,
+                     "ns_per_particle_step": med[k] / n * 1e9, "ratio_to_largest": (med[k] / n) / ref_ns,
+                     "ratio_of_fastest": fastest, "ratio_per_round": per_round})
+    a, b = fit_fixed_cost([k[1] for k in blocks], [med[k] for k in blocks])
+    return rows, a, b
+
+
 def fixed_cost(args):
     """``pmpm bench fixedcost``: returns the exit code."""
-    samples = measure(args.particles, args.repeat, args.work, args.material)
-    sizes = sorted(samples)
-    med = {n: statistics.median(samples[n]) for n in sizes}
-    ref = sizes[-1]
-    a, b = fit_fixed_cost(sizes, [med[n] for n in sizes])
-    print(f"pmpm bench fixedcost: block, cubic MUSL {args.material}, {args.repeat} rounds, about "
+    frames = getattr(args, "frame", ["elastic"])
+    whole = getattr(args, "whole_window", False)
+    samples = measure(args.particles, args.repeat, args.work, args.material, frames=frames,
+                      whole_window=whole)
+    print(f"pmpm bench fixedcost: block (cubic MUSL {args.material})"
+          f"{' and the portal frame (' + ', '.join(frames) + ', 0.05 m)' if frames else ''}, "
+          f"{args.repeat} rounds, about "
           f"{args.work:.0f} particle-steps per sample, process CPU time, median")
-    print(f"{'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} {'vs largest':>11s}")
-    rows = []
-    for n in sizes:
-        ns = med[n] / n * 1e9
-        ratio = ns / (med[ref] / ref * 1e9)
-        per_round = [(x / n) / (y / ref) for x, y in zip(samples[n], samples[ref])]
-        rows.append({"particles": n, "us_per_step": med[n] * 1e6, "ns_per_particle_step": ns,
-                     "ratio_to_largest": ratio, "ratio_per_round": per_round})
-        print(f"{n:>10d} {med[n] * 1e6:>10.1f} {ns:>17.1f} {ratio:>11.3f}")
-    print(f"fit t = a + b n: fixed cost a = {a * 1e6:.1f} us per step, b = {b * 1e9:.1f} ns per particle-step")
-    print(json.dumps({"material": args.material, "repeat": args.repeat, "work": args.work,
-                      "fixed_us_per_step": a * 1e6, "ns_per_particle_step_fit": b * 1e9, "sizes": rows}))
+    print(f"{'scene':>18s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
+          f"{'vs largest block':>17s} {'fastest rounds':>15s}")
+    summary = {"material": args.material, "repeat": args.repeat, "work": args.work}
+    name = {None: "auto", True: "on", False: "off"}
+    for tiles in ((True, False) if whole else (None,)):
+        rows, a, b = _rows(samples, tiles)
+        for r in rows:
+            print(f"{r['scene']:>18s} {name[tiles]:>6s} {r['particles']:>10d} "
+                  f"{r['us_per_step']:>10.1f} {r['ns_per_particle_step']:>17.1f} {r['ratio_to_largest']:>17.3f} {r['ratio_of_fastest']:>15.3f}")
+        print(f"fit over the blocks (tiles {name[tiles]}) t = a + b n: fixed cost "
+              f"a = {a * 1e6:.1f} us per step, b = {b * 1e9:.1f} ns per particle-step")
+        key = "" if tiles is not False else "_whole_window"
+        summary.update({"fixed_us_per_step" + key: a * 1e6, "ns_per_particle_step_fit" + key: b * 1e9,
+                        "sizes" + key: [r for r in rows if r["scene"] == "block"]})
+        for r in rows:
+            if r["scene"] != "block":
+                summary[r["scene"].replace(" ", "_") + key] = r
+    for (label, n), (tile, nodes) in measure.defaults.items():
+        print(f"{label} ({n} particles, {nodes} window nodes, {nodes / n:.2f} per particle): the solver's "
+              f"default is {'tiles of ' + str(tile) + ' nodes' if tile else 'the whole window'}")
+    summary["default_tile"] = {f"{label} {n}": tile for (label, n), (tile, _) in measure.defaults.items()}
+    print(json.dumps(summary))
     return 0

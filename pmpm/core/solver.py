@@ -21,7 +21,7 @@ from decomposition import alltoallv_fields, get_comm
 from pmpm.core import kernels as K
 from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, face_node_sets
 from pmpm.errors import ParticleExitError, UnstableRunError
-from pmpm.core.grid import Grid, GridWindow
+from pmpm.core.grid import Grid, GridWindow, choose_tile
 from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
@@ -154,7 +154,17 @@ class Solver:
         return self.decomp.owner_of_columns(cols) == self.decomp.rank
 
     def _build_window(self):
-        self.window = GridWindow(self.grid, self.axis, self.decomp.window)
+        cfg = self.scene.solver
+        self.window = GridWindow(self.grid, self.axis, self.decomp.window,
+                                 reach=ghost_width(cfg.shape_function, cfg.interpolation),
+                                 halo=self._halo_columns())
+        # CPDI: a corner may lie further from its particle than ghost_width says on one rank
+        # (only a slab boundary stops such a run), so no tile marking can bound its support
+        if cfg.interpolation != "cpdi":
+            self.window.use_tiles(choose_tile(self.window.G.shape[0] * self.window.G.shape[1],
+                                              self.particles.n))
+        else:
+            self.window.use_tiles(0)
         self.window.node_sets = self._node_sets   # body-attached boundaries' global node masks
         apply_boundary_masks(self.window, self.scene.boundaries)
         if self.reactions is not None:
@@ -163,6 +173,16 @@ class Solver:
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
         if self.ground is not None:
             self.ground.bind(self.window)
+
+    def _halo_columns(self):
+        """Window columns at the lower and upper end that the halo exchange reads or writes:
+        the ghost columns and the owned ones a neighbour holds as its ghosts (none without a
+        neighbour)."""
+        d = self.decomp
+        (n0, n1), (w0, w1), g = d.owned, d.window, d.ghost
+        lower = min(n0 + g, w1) - w0 if d.lower != MPI.PROC_NULL else 0
+        upper = w1 - max(n1 - g, w0) if d.upper != MPI.PROC_NULL else 0
+        return lower, upper
 
     def _initial_domains(self, vol, body):
         """The GIMP particle domains: half-lengths (cells) of the square of the particle's area,
@@ -221,8 +241,9 @@ class Solver:
 
     # -- the phases --------------------------------------------------------------------------
     def reset_grid(self):
-        """Step 1: zero the rank's grid window (owned and ghost nodes)."""
-        self.window.reset()
+        """Step 1: zero the rank's grid window (owned and ghost nodes) and choose the tiles
+        this step's node passes visit: those the particles' stencils reach (plus the halo)."""
+        self.window.reset(self.particles["x"])
 
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
@@ -250,7 +271,7 @@ class Solver:
         react = self.reactions.kernel_arg() if self.reactions is not None else None
         damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
                                           0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
-                                          react)
+                                          react, w.tiles)
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
 
@@ -258,7 +279,7 @@ class Solver:
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         w = self.window
         K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
-                               0, w.shape[0], 0, w.shape[1])
+                               0, w.shape[0], 0, w.shape[1], w.tiles)
 
     def grid_to_particles(self, remap):
         """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
