@@ -562,12 +562,8 @@ class Run:
         if self.output is not None:
             output, self.output = self.output, None
             self._guard(self.path, output.close)
-            if output.xdmf:
-                pass  # the writer rewrote the sidecar after each frame: it is current
-            elif "x" in self.scene.output.fields:
-                from pmpm.io import write_xdmf
-                self._guard(self.path[:-3] + ".xdmf", lambda: write_xdmf(self.path) if self.rank == 0 else None)
-            elif self.rank == 0:
+            # with positions among the fields the writer rewrote the sidecar after each frame
+            if not output.xdmf and self.rank == 0:
                 logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")
 
 
