@@ -88,6 +88,17 @@ def test_free_fall_stops_at_the_first_step_past_the_drop(tmp_path):
     assert res.frame_times[-1] == pytest.approx(stop["time"], abs=1e-12)
 
 
+def test_above_stops_at_the_same_first_step_past_the_drop(tmp_path):
+    """|u| above d: the fall is vertical (ux = 0 exactly), so |u| = -uy and the run stops at the
+    same first step n with g dt^2 n (n + 1) / 2 > d as the ``below`` test."""
+    res = pmpm.run(str(_write(tmp_path)), overrides={"stop": [{"track": "corner", "quantity": "|u|",
+                                                               "above": DROP}]},
+                   dataframes=False)
+    n = next(k for k in range(1, 1000) if G * DT * DT * k * (k + 1) / 2 > DROP)
+    assert res.stopped["side"] == "above" and res.stopped["step"] == n
+    assert res.stopped["value"] > DROP
+
+
 def test_a_threshold_never_reached_runs_to_the_end(tmp_path):
     path = _write(tmp_path)
     res = pmpm.run(str(path), overrides={"stop.0.below": -100.0, "solver.end_time": 0.3},
