@@ -15,9 +15,6 @@ builds no StopCheck and pays nothing.
 """
 import math
 
-import numpy as np
-from mpi4py import MPI
-
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
 
 __all__ = ["StopCheck", "Stopped", "make_stop_check"]
@@ -60,39 +57,6 @@ class StopCheck:
         self.row = {name: self.tracker.names.index(name) for name in watched}
         self.solver = solver
         self.after = min(s.after for s in self.stops)
-        self._local_rows = np.full(len(watched), -1, dtype=np.int64)  # where each is, if here
-        self._sample = np.zeros((len(watched), len(HISTORY_COLUMNS)))
-        self._total = np.zeros_like(self._sample)
-
-    def _find(self, k, ids):
-        """This rank's row of the k-th watched particle, or -1: the row found last time if it
-        still holds that id (particles move between rows only when sorted or migrated), else
-        one vectorised search."""
-        r = self._local_rows[k]
-        pid = self.tracker.ids[k]
-        if not (0 <= r < len(ids) and ids[r] == pid):
-            hits = np.flatnonzero(ids == pid)
-            r = self._local_rows[k] = hits[0] if hits.size else -1
-        return r
-
-    def sample(self):
-        """(watched tracks, HISTORY_COLUMNS) values, identical on every rank: the owner's row,
-        zeros elsewhere, summed by one allreduce (none on one rank). The same values as
-        :meth:`pmpm.io.tracking.Tracker.sample`, at a fraction of its cost."""
-        p, out = self.solver.particles, self._sample
-        out[:] = 0.0
-        if p.n:
-            ids = p["id"]
-            for k in range(len(out)):
-                r = self._find(k, ids)
-                if r >= 0:
-                    x, x0, v, st = p["x"][r], p["x0"][r], p["v"][r], p["stress"][r]
-                    out[k] = (x[0] - x0[0], x[1] - x0[1], v[0], v[1], x[0], x[1], st[0], st[1], st[2])
-        comm = self.solver.comm
-        if comm.Get_size() == 1:
-            return out
-        comm.Allreduce(out, self._total, op=MPI.SUM)
-        return self._total
 
     def check(self):
         """Collective: the :class:`Stopped` record of the first condition that holds after
@@ -100,7 +64,7 @@ class StopCheck:
         s = self.solver
         if s.t < self.after:
             return None
-        rows = self.sample()  # allreduced: identical everywhere
+        rows = self.tracker.sample()  # identical on every rank
         for stop in self.stops:
             if s.t < stop.after:
                 continue

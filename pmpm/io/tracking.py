@@ -27,8 +27,7 @@ class Tracker:
         self.points = [tuple(float(c) for c in t.point) for t in tracks]
         self.solver = solver
         self.ids = np.array([self._nearest(t.point) for t in tracks], dtype=np.int64)
-        self._rows_of = None
-        self._order_key = None
+        self._rows = np.full(len(self.ids), -1, dtype=np.int64)  # each one's row here, or -1
 
     def _nearest(self, point):
         p = self.solver.particles
@@ -45,17 +44,31 @@ class Tracker:
                        "point_units": "m"}
                 for name, pid, point in zip(self.names, self.ids, self.points)}
 
+    def _row(self, k, ids):
+        """This rank's row of the k-th followed particle, or -1: the row found last time if it
+        still holds that id (rows change only when particles are sorted or migrate), else one
+        vectorised search."""
+        r = self._rows[k]
+        if not (0 <= r < len(ids) and ids[r] == self.ids[k]):
+            hits = np.flatnonzero(ids == self.ids[k])
+            r = self._rows[k] = hits[0] if hits.size else -1
+        return r
+
     def sample(self):
-        """(n_tracks, len(HISTORY_COLUMNS)) values, identical on every rank."""
+        """(n_tracks, len(HISTORY_COLUMNS)) values, identical on every rank: the owner's row,
+        zeros elsewhere, summed over the ranks (no reduction on one rank)."""
         out = np.zeros((len(self.ids), len(HISTORY_COLUMNS)))
         p = self.solver.particles
         if len(self.ids) and p.n:
-            rows = np.nonzero(np.isin(p["id"], self.ids))[0]
-            for r in rows:
-                k = int(np.nonzero(self.ids == p["id"][r])[0][0])
-                x, x0, v, s = p["x"][r], p["x0"][r], p["v"][r], p["stress"][r]
-                out[k] = (x[0] - x0[0], x[1] - x0[1], v[0], v[1], x[0], x[1], s[0], s[1], s[2])
-        return self.solver.decomp.allreduce_sum(out) if len(self.ids) else out
+            ids = p["id"]
+            for k in range(len(self.ids)):
+                r = self._row(k, ids)
+                if r >= 0:
+                    x, x0, v, s = p["x"][r], p["x0"][r], p["v"][r], p["stress"][r]
+                    out[k] = (x[0] - x0[0], x[1] - x0[1], v[0], v[1], x[0], x[1], s[0], s[1], s[2])
+        if not len(self.ids) or self.solver.comm.Get_size() == 1:
+            return out
+        return self.solver.decomp.allreduce_sum(out)
 
 
 def _min_op():
