@@ -10,7 +10,6 @@ overrides.  See docs/api.md.
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 import time
@@ -21,13 +20,15 @@ __all__ = ["run", "Result", "load_results"]
 
 
 def _scenes(scene, overrides, variant):
-    """The scenes to run: a path or TOML dict with overrides applied, or a ready Scene."""
-    from pmpm.scene.config import Scene, apply_overrides, parse_scene, read_toml
+    """The scenes to run: a path or TOML dict with overrides applied, or a ready Scene; every
+    one through the checks of names and paths the CLI makes (pmpm.scene.config.resolve_scenes)."""
+    from pmpm.scene.config import Scene, check_run_names, read_toml, resolve_scenes
 
     if isinstance(scene, Scene):
         if overrides:
             raise TypeError("overrides need the scene as a path or a dict of TOML data, not a Scene "
                             "(a Scene is already resolved)")
+        check_run_names([scene])
         return [scene]
     if isinstance(scene, (str, os.PathLike)):
         path = os.fspath(scene)
@@ -36,25 +37,9 @@ def _scenes(scene, overrides, variant):
         path, data = "<scene>", scene
     else:
         raise TypeError(f"scene must be a path, a dict of TOML data or a Scene, not {type(scene).__name__}")
-    from pmpm.errors import ConfigError
-
     if overrides is not None and not isinstance(overrides, dict):
         raise TypeError(f"overrides must be a dict of dotted keys, not {type(overrides).__name__}")
-    variants = data.get("variants", {})
-    if not isinstance(variants, dict):
-        raise ConfigError("variants", "must be tables [variants.<name>]")
-    if variant is not None and variant not in variants:
-        known = ", ".join(variants) or "none"
-        raise ConfigError("variants", f"no variant {variant!r} (defined: {known})")
-    names = [variant] if variant is not None else list(variants) or [""]
-    scenes = []
-    for name in names:
-        if name and not isinstance(variants[name], dict):
-            raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
-        merged = apply_overrides(data, variants[name], f"variants.{name}") if name else data
-        merged = apply_overrides(merged, overrides or {}, "overrides")
-        scenes.append(dataclasses.replace(parse_scene(merged, path), variant=name))
-    return scenes
+    return resolve_scenes(data, path, variant, overrides)
 
 
 def _progress_callback(progress):

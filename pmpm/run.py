@@ -117,6 +117,10 @@ class Run:
 
     def __init__(self, scene, comm=None, write=True, restart=None):
         self.scene = scene
+        if write:
+            # whoever built the scene (CLI, API, a script): no output name leaves the folder
+            from pmpm.scene.config import check_written_scene
+            check_written_scene(scene)
         from pmpm.physics.contact import ContactSolver  # scene [contact]: one velocity field per body
         self.solver = (Solver if scene.contact is None else ContactSolver)(scene, comm)
         self.comm = self.solver.comm

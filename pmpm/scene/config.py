@@ -24,7 +24,7 @@ from pmpm.scene.tables import REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
 from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 
-__all__ = ["Scene", "load_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
+__all__ = ["Scene", "load_scene", "resolve_scenes", "check_run_names", "check_written_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
 logger = logging.getLogger(__name__)
 
 SHAPE_NAMES = ("linear", "quadratic", "cubic")
@@ -786,35 +786,69 @@ def read_toml(path):
         raise ConfigError(path, "not valid TOML (nested too deeply)") from None
 
 
-def load_scene(path, variant=None):
+def load_scene(path, variant=None, overrides=None):
     """Read and validate ``path``; with ``variant``, apply ``[variants.<variant>]`` first.
 
     Returns a list of scenes: one per variant when the scene declares variants and none is
-    chosen, else one. Variant names follow the file-name rule (:mod:`pmpm.scene.names`); no
-    two outputs of the runs share a file, none leaves ``output.directory``, and that directory
-    can be created (nothing is created here).
+    chosen, else one. See :func:`resolve_scenes` for the checks (every entry point, the CLI and
+    the Python API alike, goes through them).
     """
-    data = read_toml(path)
+    return resolve_scenes(read_toml(path), path, variant, overrides)
+
+
+def resolve_scenes(data, path="<scene>", variant=None, overrides=None):
+    """The validated scenes of TOML ``data`` read from ``path``: one per variant (or the one
+    ``variant``), each with the dotted-key ``overrides`` applied after its variant's own.
+
+    The one validation path of every entry point (``pmpm case.toml``, :func:`pmpm.run`,
+    :func:`load_scene`): variant names follow the file-name rule (:mod:`pmpm.scene.names`);
+    no two outputs of the runs share a file, none leaves ``output.directory``, and that
+    directory can be created (nothing is created here).
+    """
+    if overrides is not None and not isinstance(overrides, dict):
+        raise ConfigError("overrides", f"must be a dict of dotted keys, not {type(overrides).__name__}")
     variants = data.get("variants", {})
-    if not variants:
-        if variant:
-            raise ConfigError("variants", f"scene has no variants (asked for {variant!r})")
-        scenes = [parse_scene(data, path)]
-    else:
-        if not isinstance(variants, dict):
-            raise ConfigError("variants", "must be tables [variants.<name>]")
-        for name in variants:
-            check_name(name, "variants", "variant name")  # the key holds no raw name (may hold /)
-        names = [variant] if variant else list(variants)
-        scenes = []
-        for name in names:
-            if name not in variants:
-                raise ConfigError("variants", f"no variant {name!r} (defined: {', '.join(variants)})")
-            if not isinstance(variants[name], dict):
-                raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
-            scene = parse_scene(apply_overrides(data, variants[name], f"variants.{name}"), path)
-            scenes.append(dataclasses.replace(scene, variant=name))
+    if not isinstance(variants, dict):
+        raise ConfigError("variants", "must be tables [variants.<name>]")
+    for name in variants:
+        check_name(name, "variants", "variant name")  # the key holds no raw name (may hold /)
+    if variant is not None and not isinstance(variant, str):
+        raise ConfigError("variant", f"must be a variant name, not {type(variant).__name__}")
+    if variant and not variants:
+        raise ConfigError("variants", f"no variant {variant!r} (defined: none)")
+    names = [variant] if variant else list(variants) or [""]
+    scenes = []
+    for name in names:
+        if name and name not in variants:
+            raise ConfigError("variants", f"no variant {name!r} (defined: {', '.join(variants)})")
+        if name and not isinstance(variants[name], dict):
+            raise ConfigError(f"variants.{name}", "must be a table of dotted-key overrides")
+        merged = apply_overrides(data, variants[name], f"variants.{name}") if name else data
+        if overrides:
+            merged = apply_overrides(merged, overrides, "overrides")
+        scenes.append(dataclasses.replace(parse_scene(merged, path), variant=name))
+    check_run_names(scenes)
+    return scenes
+
+
+def check_run_names(scenes):
+    """The checks of names and paths a run's outputs need, on resolved scenes (also those a
+    caller built or changed itself): the variant name follows the file-name rule, the output
+    directory can be created, no two outputs share a file and none leaves the directory."""
     for scene in scenes:
+        if not isinstance(scene.variant, str):
+            raise ConfigError("variants", "a variant name must be a string")
+        if scene.variant:
+            check_name(scene.variant, "variants", "variant name")
         check_output_directory(scene.output.directory)
     check_output_files(scenes)
-    return scenes
+
+
+def check_written_scene(scene):
+    """What a run that writes files needs beyond :func:`check_run_names`: a scene file name
+    (its stem names the files; a scene given as TOML data has none)."""
+    if scene.path == "<scene>":
+        raise ConfigError("scene", "a scene given as TOML data has no file name to name its output "
+                                   "files: write it to a .toml file to run it with write=True")
+    check_name(scene.stem, scene.path, "scene file name (its stem names the output files)")
+    check_run_names([scene])

@@ -467,3 +467,69 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
         assert f"t = {max(complete):.6g} s" in proc.stdout.decode()
     finally:
         subprocess.run(["umount", str(disk)], capture_output=True)
+
+
+# -- the same table through the Python API (issue 19: the API once skipped the CLI's checks) --
+#: CLI-only cases: a scene file name the API gets as given ("rename:"), flags the API has not
+API_SKIP = {n for n, (edit, _f, args, _c, _e) in CASES.items()
+            if isinstance(edit, str) or any(a.startswith("--") and a != "--check" for a in args)}
+
+
+@pytest.mark.parametrize("name", [n for n in CASES if CASES[n][3] == 2 and n not in API_SKIP])
+def test_bad_input_through_the_api_keeps_the_promise(tmp_path, monkeypatch, name):
+    """``pmpm.run(..., write=True)`` refuses every scene the CLI refuses, with the same
+    reason, and writes nothing anywhere (checked three folders up)."""
+    import pmpm
+    from pmpm.errors import ConfigError
+    edit, files, _args, _code, expected = CASES[name]
+    work = tmp_path / "a" / "b" / "c"
+    work.mkdir(parents=True)
+    data = edit(BASE)
+    (work / "case.toml").write_bytes(data if isinstance(data, bytes) else data.encode())
+    for fname, content in files.items():
+        (work / fname).write_bytes(content if isinstance(content, bytes) else content.encode())
+    monkeypatch.chdir(work)
+    before = _tree(tmp_path)
+    with pytest.raises(ConfigError) as err:
+        pmpm.run("case.toml", write=True)
+    reason = expected.split("case.toml: ", 1)[-1]
+    assert reason in str(err.value), (str(err.value), reason)
+    assert _tree(tmp_path) == before, "a file was written"
+
+
+@pytest.mark.parametrize("variant", ["x/../../../../name", "../victim", "/abs", "a\nb", "", 7])
+def test_api_variant_argument_cannot_leave_the_folder(tmp_path, monkeypatch, variant):
+    """The attack of issue 19: a variant name given to pmpm.run (or set on a Scene by hand)
+    that would put the results, checkpoints or last good state outside output.directory."""
+    import dataclasses
+    import pmpm
+    from pmpm.errors import ConfigError
+    work = tmp_path / "a" / "b" / "c"
+    work.mkdir(parents=True)
+    (work / "case.toml").write_text(BASE + '\n[variants.x]\n"solver.cfl" = 0.4\n')
+    monkeypatch.chdir(work)
+    before = _tree(tmp_path)
+    if variant != "":  # "" means "every variant" to pmpm.run: valid there
+        with pytest.raises(ConfigError, match="variant"):
+            pmpm.run("case.toml", write=True, variant=variant)
+    scene = pmpm.load_scene("case.toml", "x")[0]
+    with pytest.raises(ConfigError, match="variant"):
+        pmpm.run(dataclasses.replace(scene, variant=variant) if variant != "" else
+                 dataclasses.replace(scene, variant="../../x"), write=True)
+    from pmpm.run import Run
+    with pytest.raises(ConfigError, match="variant"):
+        Run(dataclasses.replace(scene, variant="../../../../name"), write=True)
+    assert _tree(tmp_path) == before, "a file was written"
+
+
+def test_api_dict_scene_writes_only_with_a_file_name(tmp_path, monkeypatch):
+    """A scene given as TOML data has no stem to name files: write=True is refused in one
+    ConfigError (it once wrote '<scene>.h5'); write=False runs."""
+    import tomllib
+    import pmpm
+    from pmpm.errors import ConfigError
+    monkeypatch.chdir(tmp_path)
+    data = tomllib.loads(BASE)
+    with pytest.raises(ConfigError, match="no file name"):
+        pmpm.run(data, write=True)
+    assert os.listdir(tmp_path) == []
