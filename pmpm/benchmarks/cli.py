@@ -68,6 +68,8 @@ def add_bench_parser(sub):
                          "beside the blocks (default elastic; none: --frame with no value)")
     fc.add_argument("--whole-window", action="store_true",
                     help="also time every case with the grid tiles off (each node pass over the whole window)")
+    from pmpm.benchmarks import ranks
+    ranks.add_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 
@@ -86,6 +88,9 @@ def main(args):
     if args.bench == "peer":
         from pmpm.benchmarks.peer import peer
         return peer(args)
+    if args.bench == "ranks":
+        from pmpm.benchmarks.ranks import ranks
+        return ranks(args)
     if args.bench == "effects":
         return effects(args)
     from pmpm.benchmarks.scaling import scaling
