@@ -381,12 +381,22 @@ class Run:
 
     # -- recording --------------------------------------------------------------------------
     def record_history(self):
-        e = self.solver.energies()
-        self.history_t.append(self.solver.t)
-        self.history_rows.append(self.tracker.sample())
-        self.energy_rows.append([self.solver.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
+        """One history row: the energies, the tracked points and the structural results, all
+        summed over the ranks in one reduction."""
+        s = self.solver
+        energies = s.local_energies()
+        tracks = self.tracker.local_rows()
+        parts = [energies, tracks.ravel()]
         if self.structural is not None:
-            self.structural.sample()
+            parts.append(self.structural.local_rows())
+        total = s.decomp.allreduce_sum(np.concatenate(parts))
+        e = s.energies(total[:len(energies)])
+        rows = total[len(energies):len(energies) + tracks.size].reshape(tracks.shape)
+        self.history_t.append(s.t)
+        self.history_rows.append(rows)
+        self.energy_rows.append([s.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
+        if self.structural is not None:
+            self.structural.sample(summed=total[len(energies) + tracks.size:])
         if self.initial_energy is None:
             self.initial_energy = e["total"]
         return e

@@ -54,14 +54,22 @@ class StructuralRecorder:
             out[k] = cut.resultants(p["x"][idx], p["stress"][idx], p["vol"][idx], phi)
         return out
 
-    def sample(self):
-        """Record one row at the solver's time; returns (sections, reactions) arrays."""
-        s = self.solver
-        nc = len(self.cuts)
+    def local_rows(self):
+        """This rank's partial sums of one sample, flat: the cuts' N, V, M, then the reactions'
+        impulse sums (a caller may reduce them with other figures in one reduction)."""
         local = [self.local_sections()]
         if self.reactions is not None:
             local.append(self.reactions.sums.copy())
-        total = s.decomp.allreduce_sum(np.concatenate(local).ravel()).reshape(-1, 3)
+        return np.concatenate(local).ravel()
+
+    def sample(self, summed=None):
+        """Record one row at the solver's time; returns (sections, reactions) arrays.
+        ``summed``: :meth:`local_rows` already summed over the ranks, else summed here."""
+        s = self.solver
+        nc = len(self.cuts)
+        if summed is None:
+            summed = s.decomp.allreduce_sum(self.local_rows())
+        total = np.asarray(summed).reshape(-1, 3)
         sections = total[:nc]
         reactions = (self.reactions.take(s.t, None, summed=total[nc:])
                      if self.reactions is not None else np.zeros((0, 3)))
