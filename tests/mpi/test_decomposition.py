@@ -133,6 +133,26 @@ def test_one_round_halo_equals_accumulate_then_fill_bit_for_bit(axis, ghost, lay
     assert everywhere(decomp.waits["halo"] - waits == rounds)
 
 
+@parallel_only
+def test_a_wait_for_a_late_neighbour_sleeps_instead_of_polling():
+    """A rank whose neighbour is 0.2 s late waits in naps (decomposition/waiting.py): a few
+    ms of CPU time (1,000 naps of <= 200 us, each a few us of CPU), where polling would burn
+    the whole 0.2 s (allowed: 0.05 s, a quarter of it)."""
+    import time
+    decomp = SlabDecomposition(comm, (11, 4), axis=0, ghost=2)
+    arr = np.ones(decomp.window_shape)
+    decomp.sum_halo(arr)  # connections set up
+    comm.Barrier()
+    late = decomp.rank == 0
+    if late:
+        time.sleep(0.2)
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    decomp.sum_halo(arr)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    waited_long = (not late) and decomp.rank == 1 and wall > 0.1
+    assert everywhere(not waited_long or cpu < 0.05)
+
+
 # ----------------------------------------------------------------------- migration
 def _particles(decomp, n_local, rng):
     """Particles in this rank's owned cells, with ids unique over all ranks."""
