@@ -134,23 +134,41 @@ def test_one_round_halo_equals_accumulate_then_fill_bit_for_bit(axis, ghost, lay
 
 
 @parallel_only
-def test_a_wait_for_a_late_neighbour_sleeps_instead_of_polling():
-    """A rank whose neighbour is 0.2 s late waits in naps (decomposition/waiting.py): a few
-    ms of CPU time (1,000 naps of <= 200 us, each a few us of CPU), where polling would burn
-    the whole 0.2 s (allowed: 0.05 s, a quarter of it)."""
+def test_a_wait_for_a_late_neighbour_sleeps_instead_of_polling(monkeypatch):
+    """A rank whose neighbour is 0.2 s late waits in naps (decomposition/waiting.py), not by
+    polling: it sleeps, at least the 5 growing naps (10 + 20 + 40 + 80 + 160 us) a wait longer
+    than 0.15 s must pass through whatever the machine's load (a nap lasts at least its
+    length; a loaded machine makes them longer, so fewer), and the exchange completes with the
+    right sums. Polling (PMPM_MPI_WAIT=spin) naps never."""
     import time
+    from decomposition import waiting
     decomp = SlabDecomposition(comm, (11, 4), axis=0, ghost=2)
-    arr = np.ones(decomp.window_shape)
-    decomp.sum_halo(arr)  # connections set up
+    decomp.sum_halo(np.ones(decomp.window_shape))  # connections set up
+    naps = []
+    real_sleep = time.sleep
+
+    def counted(seconds):
+        naps.append(seconds)
+        real_sleep(seconds)
+
+    monkeypatch.setattr(waiting, "time", type("clock", (), {"sleep": staticmethod(counted),
+                                                             "perf_counter": time.perf_counter}))
     comm.Barrier()
     late = decomp.rank == 0
     if late:
-        time.sleep(0.2)
-    cpu0, wall0 = time.process_time(), time.perf_counter()
+        real_sleep(0.2)
+    arr = np.ones(decomp.window_shape)
+    wall0 = time.perf_counter()
     decomp.sum_halo(arr)
-    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
-    waited_long = (not late) and decomp.rank == 1 and wall > 0.1
-    assert everywhere(not waited_long or cpu < 0.05)
+    wall = time.perf_counter() - wall0
+    cols = np.arange(*decomp.window)
+    shared = np.array([sum(lo <= c < hi for lo, hi in zip(np.maximum(decomp.bounds[:-1] - 2, 0),
+                                                           np.minimum(decomp.bounds[1:] + 2, 11)))
+                       for c in cols], dtype=float)
+    assert everywhere(np.array_equal(arr, np.broadcast_to(shared[:, None], arr.shape)))
+    waited = decomp.rank == 1 and wall > 0.15
+    assert everywhere(not waited or len(naps) >= 5)
+    assert everywhere(decomp.rank != 1 or wall > 0.15)  # rank 1 did wait for rank 0
 
 
 # ----------------------------------------------------------------------- migration
