@@ -29,8 +29,9 @@ import numpy as np
 
 from pmpm.io import schema
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
+from pmpm.scene.names import energies_png, history_png
 
-__all__ = ["plot_results", "plot_deformed", "energy_balance_error"]
+__all__ = ["plot_results", "plot_deformed", "energy_balance_error", "scene_stem"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,6 +50,19 @@ def _label(path, attrs):
     """Return the legend label of a results file: its ``variant`` or its stem."""
     variant = attrs.get("variant")
     return str(variant) if variant else os.path.splitext(os.path.basename(path))[0]
+
+
+def _file_stem(path):
+    return os.path.splitext(os.path.basename(path))[0]
+
+
+def scene_stem(h5_path):
+    """The stem of the scene file that wrote a results file (its ``scene_file`` attribute),
+    else the file's own stem: the prefix of the history plots, shared by a scene's variants."""
+    scene_file = read_attrs(h5_path).get("scene_file")
+    if isinstance(scene_file, str) and scene_file:
+        return _file_stem(scene_file)
+    return _file_stem(h5_path)
 
 
 def _axis(name, units):
@@ -103,7 +117,7 @@ def energy_balance_error(energies):
     return (balance - balance[0]) / scale
 
 
-def _plot_track(track, runs, outdir):
+def _plot_track(track, runs, outdir, stem):
     """Draw the displacement columns of one track, one panel each, all runs overlaid."""
     columns = next(cols for _, _, tracks, cols in runs if track in tracks)
     # Displacements are what a history is read for; other columns only without them
@@ -122,13 +136,13 @@ def _plot_track(track, runs, outdir):
     axes[0].set_title(f"history of {track}")
     _legend(axes[0])
     axes[-1].set_xlabel(_axis("time", "s"))
-    path = os.path.join(outdir, f"history_{_safe(track)}.png")
+    path = os.path.join(outdir, history_png(stem, _safe(track)))
     fig.savefig(path, dpi=110)
     return path
 
 
-def _plot_energies(label, energies, outdir):
-    """Draw the energy columns and the balance error of one run."""
+def _plot_energies(label, energies, outdir, run):
+    """Draw the energy columns and the balance error of one run (``run``: its file's stem)."""
     time = energies["time"]
     fig = _new_figure(figsize=(8, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
@@ -145,7 +159,7 @@ def _plot_energies(label, energies, outdir):
     bottom.set_ylabel(_axis("relative balance error", "1"))
     bottom.set_xlabel(_axis("time", "s"))
     bottom.grid(True, alpha=0.3)
-    path = os.path.join(outdir, f"energies_{_safe(label)}.png")
+    path = os.path.join(outdir, energies_png(_safe(run)))
     fig.savefig(path, dpi=110)
     return path
 
@@ -166,20 +180,24 @@ def plot_results(h5_paths, outdir):
     Returns
     -------
     list of str
-        ``history_<track>.png`` for every track, then ``energies_<label>.png`` for
+        ``<stem>_history_<track>.png`` for every track (``<stem>``: the scene file's stem
+        of the first file, see :func:`scene_stem`), then ``<file stem>_energies.png`` for
         every file with energy rows.
     """
     outdir = os.fspath(outdir)
     os.makedirs(outdir, exist_ok=True)
     runs, energy_runs = [], []
-    for path in map(os.fspath, h5_paths):
-        label = _label(path, read_attrs(path))
+    paths = list(map(os.fspath, h5_paths))
+    for path in paths:
+        attrs = read_attrs(path)
+        label = _label(path, attrs)
         times, tracks, columns = read_history(path)
         runs.append((label, times, tracks, columns))
-        energy_runs.append((label, read_energies(path)))
+        energy_runs.append((label, read_energies(path), _file_stem(path)))
+    stem = _safe(scene_stem(paths[0]))
     track_names = list(dict.fromkeys(t for _, _, tracks, _ in runs for t in tracks))
-    pngs = [_plot_track(track, runs, outdir) for track in track_names]
-    pngs += [_plot_energies(label, e, outdir) for label, e in energy_runs if len(e.get("time", ()))]
+    pngs = [_plot_track(track, runs, outdir, stem) for track in track_names]
+    pngs += [_plot_energies(label, e, outdir, run) for label, e, run in energy_runs if len(e.get("time", ()))]
     logger.info("wrote %d plots to %s", len(pngs), outdir)
     return pngs
 

@@ -6,22 +6,28 @@ import h5py
 import numpy as np
 
 from pmpm.io.hdf5 import read_history
+from pmpm.scene.names import deformed_png, track_csv
 
 __all__ = ["write_history_csv", "postprocess"]
 logger = logging.getLogger(__name__)
 
 
+def _run(h5_path):
+    """``<stem>[_<variant>]``: the results file's own stem names its post-processed files."""
+    return os.path.splitext(os.path.basename(h5_path))[0]
+
+
 def write_history_csv(h5_path, outdir):
-    """One CSV per tracked point: ``<track>[_<variant>].csv`` with t, ux, uy, vx, vy (SI units)."""
+    """One CSV per tracked point: ``<stem>[_<variant>]_history_<track>.csv`` with t, ux, uy,
+    vx, vy (SI units)."""
     paths = []
     with h5py.File(h5_path, "r") as f:
-        variant = f.attrs.get("variant", "")
         if "history" not in f:
             return paths
         t, tracks, cols = read_history(f)
         for name, data in tracks.items():
             keep = [cols.index(c) for c in ("ux", "uy", "vx", "vy")]
-            path = os.path.join(outdir, f"{name}{'_' + variant if variant else ''}.csv")
+            path = os.path.join(outdir, track_csv(_run(h5_path), name))
             np.savetxt(path, np.column_stack([t, data[:, keep]]), delimiter=",",
                        header="t,ux,uy,vx,vy", comments="", fmt="%.9g")
             paths.append(path)
@@ -52,13 +58,12 @@ def _deformed(h5_path, spec, outdir):
     """Deformed shape at the frame where the tracked displacement is largest."""
     from pmpm.io import plot_deformed
     with h5py.File(h5_path, "r") as f:
-        variant = f.attrs.get("variant", "")
         times = f["frames/time"][:]
         ht, tracks, cols = read_history(f)
         u = np.abs(tracks[spec["track"]][:, cols.index(spec["component"])])
         t_peak = ht[int(np.argmax(u))]
         frame = int(np.argmin(np.abs(times - t_peak)))
         color = spec["color"] if f"frames/{spec['color']}" in f else "x"
-    out = os.path.join(outdir, f"deformed{'_' + variant if variant else ''}.png")
+    out = os.path.join(outdir, deformed_png(_run(h5_path)))
     plot_deformed(h5_path, frame, color, spec["scale"], out)
     return out

@@ -17,7 +17,8 @@ import re
 from pmpm.errors import ConfigError
 
 __all__ = ["check_name", "run_files", "check_output_files", "check_output_directory",
-           "output_base", "NAME_PATTERN"]
+           "output_base", "run_name", "track_csv", "history_png", "energies_png", "deformed_png",
+           "NAME_PATTERN"]
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 _RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)),
@@ -56,34 +57,60 @@ def check_name(name, key, what="name", also_reserved=()):
     return name
 
 
+def run_name(scene):
+    """``<stem>[_<variant>]``: the name of one run, the prefix of every file it owns alone."""
+    return scene.stem + (f"_{scene.variant}" if scene.variant else "")
+
+
 def output_base(scene):
     """``<output.directory>/<stem>[_<variant>]``: the common prefix of the run's HDF5 files."""
-    name = scene.stem + (f"_{scene.variant}" if scene.variant else "")
-    return os.path.join(scene.output.directory, name)
+    return os.path.join(scene.output.directory, run_name(scene))
+
+
+# The files written after the run (pmpm.io.post, pmpm plot). Every name starts with the scene's
+# stem, so scenes sharing an output folder never share a file; the history plot overlays every
+# variant of the scene and so carries the stem alone.
+def track_csv(run, track):
+    """``<run>_history_<track>.csv``: the time history of one tracked point."""
+    return f"{run}_history_{track}.csv"
+
+
+def history_png(stem, track):
+    """``<stem>_history_<track>.png``: one tracked point, every variant overlaid."""
+    return f"{stem}_history_{track}.png"
+
+
+def energies_png(run):
+    """``<run>_energies.png``: the energies and the balance error of one run."""
+    return f"{run}_energies.png"
+
+
+def deformed_png(run):
+    """``<run>_deformed.png``: the deformed shape at the largest tracked displacement."""
+    return f"{run}_deformed.png"
 
 
 def run_files(scene):
     """(key that made it, file name) of every file the run of ``scene`` may write, relative
     to ``output.directory``."""
-    stem = scene.stem + (f"_{scene.variant}" if scene.variant else "")
+    run = run_name(scene)
     key = f"variants.{scene.variant}" if scene.variant else "scene file name"
-    files = [(key, stem + ext) for ext in (".h5", ".xdmf", ".ckpt0.h5", ".ckpt1.h5", ".lastgood.h5")]
-    suffix = f"_{scene.variant}" if scene.variant else ""
+    files = [(key, run + ext) for ext in (".h5", ".xdmf", ".ckpt0.h5", ".ckpt1.h5", ".lastgood.h5")]
     for k, tr in enumerate(scene.output.track):
-        files.append((f"output.track[{k}].name", f"{tr.name}{suffix}.csv"))
-        # history_<track>.png overlays every variant: one shared file (see check_output_files)
-        files.append((f"output.track[{k}].name", f"history_{tr.name}.png"))
-    files.append((key, f"energies_{scene.variant or scene.stem}.png"))
+        files.append((f"output.track[{k}].name", track_csv(run, tr.name)))
+        # the history plot overlays every variant: one shared file (see check_output_files)
+        files.append((f"output.track[{k}].name", history_png(scene.stem, tr.name)))
+    files.append((key, energies_png(run)))
     # structural results (pmpm.results.post): per section and recorded reaction, and plots
     for k, sec in enumerate(getattr(scene.output, "sections", ())):
-        files.append((f"output.section[{k}].name", f"{stem}_section_{sec.name}.csv"))
+        files.append((f"output.section[{k}].name", f"{run}_section_{sec.name}.csv"))
     for k, b in enumerate(scene.boundaries):
         if getattr(b, "reaction", False):
-            files.append((f"boundary[{k}].name", f"{stem}_reaction_{b.name}.csv"))
+            files.append((f"boundary[{k}].name", f"{run}_reaction_{b.name}.csv"))
     for plot in ("sections", "utilisation", "hinges", "reactions", "hysteresis"):
-        files.append((key, f"{stem}_{plot}.png"))
+        files.append((key, f"{run}_{plot}.png"))
     if scene.output.deformed_plot:
-        files.append(("output.deformed_plot", f"deformed{suffix}.png"))
+        files.append(("output.deformed_plot", deformed_png(run)))
     return files
 
 
@@ -110,7 +137,7 @@ def check_output_files(scenes):
             where = (directory, name.lower())
             if where in seen:
                 label, first_key, first_name = seen[where]
-                shared = name.startswith("history_") and name.endswith(".png")
+                shared = name.startswith(f"{scene.stem}_history_") and name.endswith(".png")
                 if shared and first_key == key and first_name == name:
                     continue  # the same track of every variant shares its overlaid plot
                 raise ConfigError(key, f"gives the file {name!r}, as {label} does "

@@ -137,10 +137,10 @@ CASES = {
     "track-case-clash": (add('[[output.track]]\nname = "tip"\npoint = [1.0, 0.5]\n'
                              '[[output.track]]\nname = "TIP"\npoint = [1.5, 0.5]'), {}, ["--check"], 2,
                          "gives the file"),
-    "track-variant-clash": (add('[[output.track]]\nname = "a"\npoint = [1.0, 0.5]\n'
-                                '[[output.track]]\nname = "a_b"\npoint = [1.5, 0.5]\n'
-                                '[variants.b_c]\n"solver.cfl" = 0.4\n[variants.c]\n"solver.cfl" = 0.3'),
-                            {}, ["--check"], 2, "gives the file 'a_b_c.csv'"),
+    "track-variant-clash": (add('[[output.track]]\nname = "b"\npoint = [1.0, 0.5]\n'
+                                '[[output.track]]\nname = "a_history_b"\npoint = [1.5, 0.5]\n'
+                                '[variants.x_history_a]\n"solver.cfl" = 0.4\n[variants.x]\n"solver.cfl" = 0.3'),
+                            {}, ["--check"], 2, "gives the file 'case_x_history_a_history_b.csv'"),
     "output-directory-empty": (add('[output]\ndirectory = ""'), {}, ["--check"], 2, "output.directory: must be"),
     "output-directory-is-file": (add('[output]\ndirectory = "afile"'), {"afile": "x"}, ["--check"], 2,
                                  "is not a directory"),

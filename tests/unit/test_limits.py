@@ -94,7 +94,7 @@ def test_every_file_of_a_run_and_the_clash_check():
     scene = parse_scene(data, "/tmp/beam.toml")
     names = [n for _, n in run_files(scene)]
     assert names[:5] == ["beam.h5", "beam.xdmf", "beam.ckpt0.h5", "beam.ckpt1.h5", "beam.lastgood.h5"]
-    assert "tip.csv" in names and "history_tip.png" in names
+    assert "beam_history_tip.csv" in names and "beam_history_tip.png" in names
     check_output_files([scene])
     import dataclasses
     twin = dataclasses.replace(scene, output=dataclasses.replace(

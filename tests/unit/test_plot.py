@@ -44,8 +44,10 @@ def test_plot_results_overlays_variants(tmp_path):
              make_results(tmp_path / "ep.h5", "elastoplastic", 0.02)]
     pngs = plot_results(files, tmp_path / "plots")
     names = sorted(os.path.basename(p) for p in pngs)
-    assert names == ["energies_elastic.png", "energies_elastoplastic.png",
-                     "history_base.png", "history_tip.png"]
+    # the history plots carry the first file's stem (no scene_file attribute here), the
+    # energies each file's own
+    assert names == ["el_energies.png", "el_history_base.png", "el_history_tip.png",
+                     "ep_energies.png"]
     assert all(is_png(p) for p in pngs)
 
 
