@@ -18,7 +18,7 @@ def _positive(text):
 
 def add_bench_parser(sub):
     """Register ``pmpm bench throughput|scaling`` on an argparse sub-parser set."""
-    b = sub.add_parser("bench", help="benchmarks (throughput, scaling)")
+    b = sub.add_parser("bench", help="benchmarks (throughput, scaling, ranks, peer, fixedcost, ...)")
     bs = b.add_subparsers(dest="bench", required=True)
     t = bs.add_parser("throughput", help="particle-steps per second on one core")
     t.add_argument("--particles", type=_positive, nargs="+", default=[200_000],
