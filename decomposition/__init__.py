@@ -11,17 +11,22 @@ the same code: every exchange becomes a no-op.
 - :mod:`decomposition.exchange`: :func:`alltoallv_fields`, the bulk any-to-any
   move of row-indexed arrays (one Alltoall of counts, one Alltoallv of packed rows).
 - :mod:`decomposition.mpiutil`: ``get_comm``, ``install_abort_hook``, ``abort_all``.
+- :mod:`decomposition.waiting`: :func:`wait_all`, completing requests without holding the
+  core through a long wait (spin briefly, then sleep in short naps).
 """
 
 import logging
 
-from .decomp import SlabDecomposition
+from .decomp import PendingReduction, SlabDecomposition
 from .exchange import alltoallv_fields
 from .mpiutil import abort_all, get_comm, install_abort_hook
 from .slab import balanced_bounds, block_range, max_ranks
+from .waiting import wait_all
 
 __all__ = [
     "SlabDecomposition",
+    "PendingReduction",
+    "wait_all",
     "alltoallv_fields",
     "block_range",
     "balanced_bounds",

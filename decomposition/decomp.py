@@ -20,9 +20,21 @@ Halo protocol (one message to and from each neighbour per call)
 ``fill``
     The reverse: owners copy ``[n0, n0 + g)`` to ``lower`` and ``[n1 - g, n1)`` to
     ``upper``, which overwrite their ghost columns with them.
+``sum_halo``
+    Both in one round: each rank sends the partial sums of all the columns it shares with a
+    neighbour (``[n1 - g, n1 + g)`` to ``upper``, ``[n0 - g, n0 + g)`` to ``lower``) and adds
+    what it receives to the same columns. Where every shared column lies in exactly two
+    windows (every slab but the end ones at least ``2 g`` wide) both holders then hold the
+    owner's sum of ``accumulate``, bit for bit: the owner adds the same two numbers as
+    ``accumulate`` does and the other holder adds them in the other order, and floating-point
+    addition is commutative. Narrower slabs (a column in three windows) fall back to
+    ``accumulate`` then ``fill``. One message each way instead of two: half the waits.
 
-Both use ``Irecv``/``Isend`` on contiguous copies; messages travelling to higher
-ranks carry tag ``_TAG_UP`` and to lower ranks ``_TAG_DOWN``.
+All use ``Irecv``/``Isend`` on contiguous copies; messages travelling to higher
+ranks carry tag ``_TAG_UP`` and to lower ranks ``_TAG_DOWN``. They, the migration and the
+reductions complete their requests with :func:`decomposition.waiting.wait_all`, which
+sleeps through a long wait instead of holding the core. ``sum_halo`` can complete a pending
+reduction (:meth:`start_allreduce`) in the same wait, so the two cost one rendezvous.
 
 Migration protocol
 ------------------
@@ -49,8 +61,9 @@ from mpi4py import MPI
 
 from .exchange import field_layout, pack_rows, unpack_rows
 from .slab import balanced_bounds, block_bounds, check_bounds
+from .waiting import wait_all
 
-__all__ = ["SlabDecomposition"]
+__all__ = ["SlabDecomposition", "PendingReduction"]
 
 logger = logging.getLogger(__name__)
 
@@ -118,6 +131,10 @@ class SlabDecomposition:
         self.on_upper_boundary = n1 == self.ncols
         self.lower = self.rank - 1 if self.rank > 0 else MPI.PROC_NULL
         self.upper = self.rank + 1 if self.rank < self.size - 1 else MPI.PROC_NULL
+        # sum_halo's single round needs every shared column in two windows only: every slab
+        # but the end ones 2 g wide (the same answer on every rank: the bounds are global)
+        inner = np.diff(bounds)[1:-1]
+        self.one_round_halo = bool(inner.size == 0 or inner.min() >= 2 * self.ghost)
 
     @property
     def window_shape(self):
@@ -175,7 +192,7 @@ class SlabDecomposition:
             raise ValueError(f"array of shape {arr.shape} does not span the window "
                              f"{self.window} ({width} columns) along axis {self.axis}")
 
-    def _halo_exchange(self, arr, send, recv):
+    def _halo_exchange(self, arr, send, recv, also=()):
         """Send regions ``send`` and receive into copies shaped like ``recv``.
 
         Parameters
@@ -184,6 +201,8 @@ class SlabDecomposition:
             Window array.
         send, recv : tuple of (slice, slice)
             (to/from lower, to/from upper) window-local column slices.
+        also : sequence of mpi4py requests
+            Completed in the same wait (a pending reduction).
 
         Returns
         -------
@@ -205,7 +224,9 @@ class SlabDecomposition:
             buf = np.ascontiguousarray(self._columns(arr, cols))
             requests.append(self.comm.Isend(buf, dest=peer, tag=out_tag))
             self._count("halo", buf.nbytes)
-        MPI.Request.Waitall(requests)
+        if requests:
+            self.waits["halo"] += 1
+        wait_all(requests + list(also))
         return received
 
     def accumulate(self, arr):
@@ -245,6 +266,40 @@ class SlabDecomposition:
                 if buf is not None:
                     self._columns(arr, cols)[...] = buf
 
+    def sum_halo(self, arr, pending=None):
+        """:meth:`accumulate` then :meth:`fill`, in one round where the slabs allow it
+        (``one_round_halo``): afterwards every window column holds the sum of every rank's
+        contributions, owned and ghost columns alike, bit for bit as the two calls leave
+        them (collective).
+
+        Parameters
+        ----------
+        arr : numpy.ndarray
+            This rank's window array (as for :meth:`accumulate`).
+        pending : PendingReduction, optional
+            A reduction started earlier, completed in the same wait (its ``result()`` is
+            then ready without waiting).
+        """
+        also = pending.requests if pending is not None else ()
+        if not self.one_round_halo:
+            if pending is not None:
+                pending.wait()
+            self.accumulate(arr)
+            self.fill(arr)
+            return
+        with self._timed():
+            self._check_window(arr)
+            s = self._halo_slices()
+            # the shared columns: the ghosts and the owned columns the neighbour borrows
+            lo = slice(s["ghost_lo"].start, s["edge_lo"].stop)
+            hi = slice(s["edge_hi"].start, s["ghost_hi"].stop)
+            got = self._halo_exchange(arr, (lo, hi), (lo, hi), also)
+            for buf, cols in zip(got, (lo, hi)):
+                if buf is not None:
+                    self._columns(arr, cols)[...] += buf
+        if pending is not None:
+            pending.done = True
+
     # -------------------------------------------------------------- migration
     def _check_dest(self, dest):
         """Raise RuntimeError if a destination is not this rank or a neighbour."""
@@ -270,7 +325,9 @@ class SlabDecomposition:
             requests.append(self.comm.Irecv(buf, source=peer, tag=in_tag))
             requests.append(self.comm.Isend(out, dest=peer, tag=out_tag))
             self._count("migration", out.nbytes)
-        MPI.Request.Waitall(requests)
+        if requests:
+            self.waits["migration"] += 1
+        wait_all(requests)
         return [int(b[0]) for b in recv]
 
     def _exchange_rows(self, fields, masks, recv_counts):
@@ -288,7 +345,9 @@ class SlabDecomposition:
                 out = pack_rows(fields, mask)
                 requests.append(self.comm.Isend(out, dest=peer, tag=out_tag))
                 self._count("migration", out.nbytes)
-        MPI.Request.Waitall(requests)
+        if requests:
+            self.waits["migration"] += 1
+        wait_all(requests)
         return received
 
     def migrate(self, fields, dest):
@@ -375,10 +434,20 @@ class SlabDecomposition:
     # ------------------------------------------------------------ reductions
     def _allreduce(self, x, op):
         """Allreduce a scalar or small array; scalars come back as Python scalars."""
+        return self.start_allreduce(x, op).result()
+
+    def start_allreduce(self, x, op=MPI.MAX):
+        """Start reducing ``x`` (scalar or small array) over all ranks; returns a
+        :class:`PendingReduction` whose ``result()`` waits for it (collective: every rank
+        starts the same reductions in the same order)."""
         send = np.array(x)
         recv = np.empty_like(send)
-        self.comm.Allreduce(send, recv, op=op)
-        return recv if isinstance(x, np.ndarray) else recv.item()
+        if self.size == 1:
+            recv[...] = send
+            return PendingReduction(recv, [], isinstance(x, np.ndarray))
+        self.waits["reduce"] += 1
+        return PendingReduction(recv, [self.comm.Iallreduce(send, recv, op=op)],
+                                isinstance(x, np.ndarray), keep=send)
 
     def allreduce_sum(self, x):
         """Return the sum of ``x`` (scalar or small array) over all ranks."""
@@ -413,9 +482,11 @@ class SlabDecomposition:
 
     # -------------------------------------------------------------- counters
     def reset_counters(self):
-        """Zero ``bytes_sent``, ``messages_sent``, ``comm_time`` and ``comm_cpu``."""
+        """Zero ``bytes_sent``, ``messages_sent``, ``waits``, ``comm_time`` and ``comm_cpu``."""
         self.bytes_sent = {"halo": 0, "migration": 0}
         self.messages_sent = {"halo": 0, "migration": 0}
+        #: rendezvous with other ranks by kind: halo rounds, migration rounds, reductions
+        self.waits = {"halo": 0, "migration": 0, "reduce": 0}
         self.comm_time = 0.0
         self.comm_cpu = 0.0
 
@@ -445,3 +516,23 @@ class SlabDecomposition:
     def __repr__(self):
         return (f"SlabDecomposition(rank={self.rank}/{self.size}, axis={self.axis}, "
                 f"ghost={self.ghost}, owned={self.owned}, window={self.window})")
+
+
+class PendingReduction:
+    """A reduction on its way (:meth:`SlabDecomposition.start_allreduce`): ``result()`` waits
+    for it and returns the reduced array (or scalar); :meth:`SlabDecomposition.sum_halo` can
+    complete it in its own wait."""
+
+    def __init__(self, recv, requests, as_array, keep=None):
+        self._recv, self.requests, self._as_array = recv, requests, as_array
+        self._keep = keep  # the send buffer must live until the reduction completes
+        self.done = not requests
+
+    def wait(self):
+        if not self.done:
+            wait_all(self.requests)
+            self.done = True
+
+    def result(self):
+        self.wait()
+        return self._recv if self._as_array else self._recv.item()

@@ -19,6 +19,12 @@ from pmpm.jitcache import use_versioned_cache as _use_versioned_cache  # noqa: E
 # sources, so that no stale kernel can load (pmpm/jitcache.py)
 _use_versioned_cache()
 
+from pmpm.mpidefaults import choose_mpi_defaults as _choose_mpi_defaults  # noqa: E402
+
+# before MPI is initialised: Open MPI's waiting ranks yield the core unless the user said
+# otherwise (pmpm/mpidefaults.py)
+_choose_mpi_defaults()
+
 
 def __getattr__(name):
     # lazy: `pmpm --help` and scene validation must not pay for numba compilation

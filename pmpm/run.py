@@ -92,10 +92,20 @@ def _healthy_fields(fields):
 
 
 class _Snapshot:
-    """A copy of the particle state a few steps back: what a failed run saves."""
+    """A copy of the particle state a few steps back: what a failed run saves. ``reuse``: the
+    snapshot this one replaces, whose arrays it overwrites where the shapes still match (the
+    run takes one every energy check: fresh arrays each time cost their page faults too)."""
 
-    def __init__(self, solver):
-        self.fields = {k: a.copy() for k, a in solver.particles.fields.items()}
+    def __init__(self, solver, reuse=None):
+        old = reuse.fields if reuse is not None else {}
+        self.fields = {}
+        for k, a in solver.particles.fields.items():
+            b = old.get(k)
+            if b is not None and b.shape == a.shape and b.dtype == a.dtype:
+                np.copyto(b, a)
+            else:
+                b = a.copy()
+            self.fields[k] = b
         self.t, self.step, self.dt = solver.t, solver.step_count, solver.dt
         self.external_work = solver.external_work
         self.internal_work = solver.internal_work
@@ -167,7 +177,11 @@ class Run:
                 error = (exc.path, exc.reason)
             except (OSError, RuntimeError, ValueError) as exc:  # h5py and the OS on a failed write
                 error = (path, _write_reason(exc))
-            gc.collect()  # release the failed write's HDF5 objects while their errors are quiet
+            if error is not None:
+                # release the failed write's HDF5 objects while their errors are quiet (only
+                # then: a full collection of the interpreter's heap took 0.25-1 s here, twice
+                # per frame, more than the 300 steps between two frames of the main job)
+                gc.collect()
         failed = [e for e in self.comm.allgather(error) if e is not None]
         if failed:
             self._drop_output()
@@ -381,12 +395,22 @@ class Run:
 
     # -- recording --------------------------------------------------------------------------
     def record_history(self):
-        e = self.solver.energies()
-        self.history_t.append(self.solver.t)
-        self.history_rows.append(self.tracker.sample())
-        self.energy_rows.append([self.solver.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
+        """One history row: the energies, the tracked points and the structural results, all
+        summed over the ranks in one reduction."""
+        s = self.solver
+        energies = s.local_energies()
+        tracks = self.tracker.local_rows()
+        parts = [energies, tracks.ravel()]
         if self.structural is not None:
-            self.structural.sample()
+            parts.append(self.structural.local_rows())
+        total = s.decomp.allreduce_sum(np.concatenate(parts))
+        e = s.energies(total[:len(energies)])
+        rows = total[len(energies):len(energies) + tracks.size].reshape(tracks.shape)
+        self.history_t.append(s.t)
+        self.history_rows.append(rows)
+        self.energy_rows.append([s.t] + [e[_SOLVER_ENERGY.get(k, k)] for k in ENERGY_COLUMNS[1:]])
+        if self.structural is not None:
+            self.structural.sample(summed=total[len(energies) + tracks.size:])
         if self.initial_energy is None:
             self.initial_energy = e["total"]
         return e
@@ -492,7 +516,7 @@ class Run:
                     self._guard(self.path, self.checkpoint)
                     next_ckpt = _next_multiple(s.t, out.checkpoint_interval, eps, False)
                 if s.healthy_step == s.step_count and snap.step != s.step_count:
-                    snap = _Snapshot(s)  # the newest state that passed the health checks
+                    snap = _Snapshot(s, reuse=snap)  # the newest state that passed the health checks
                 s.step()
             except (UnstableRunError, ParticleExitError) as exc:
                 self.fail(exc, snap)

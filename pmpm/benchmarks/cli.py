@@ -18,7 +18,7 @@ def _positive(text):
 
 def add_bench_parser(sub):
     """Register ``pmpm bench throughput|scaling`` on an argparse sub-parser set."""
-    b = sub.add_parser("bench", help="benchmarks (throughput, scaling)")
+    b = sub.add_parser("bench", help="benchmarks (throughput, scaling, ranks, peer, fixedcost, ...)")
     bs = b.add_subparsers(dest="bench", required=True)
     t = bs.add_parser("throughput", help="particle-steps per second on one core")
     t.add_argument("--particles", type=_positive, nargs="+", default=[200_000],
@@ -50,12 +50,16 @@ def add_bench_parser(sub):
     s.add_argument("--repeat", type=_positive, default=3, help="number of timed repeats (default 3)")
     s.add_argument("--ppc", type=_positive, default=2,
                    help="particles per cell per direction (more particles on the same grid)")
-    pe = bs.add_parser("peer", help="pmpm's cubic MUSL step side by side with a JIT peer (Taichi)")
+    pe = bs.add_parser("peer", help="pmpm's cubic MUSL step side by side with JIT peers (Taichi MUSL and MLS-MPM)")
     pe.add_argument("--particles", type=_positive, nargs="+", default=[200_000, 1_000_000],
                     help="particle counts of the block (default 200000 1000000)")
     pe.add_argument("--steps", type=_positive, default=10, help="steps per timed repeat (default 10)")
     pe.add_argument("--repeat", type=_positive, default=7,
                     help="timed repeats, pmpm and the peer interleaved (default 7)")
+    pe.add_argument("--peers", nargs="+", choices=["musl", "mls_quadratic", "mls_cubic"],
+                    default=["musl", "mls_quadratic", "mls_cubic"],
+                    help="the Taichi programs: plain MUSL (cubic) and MLS-MPM with APIC "
+                         "(quadratic, cubic); default all three")
     fc = bs.add_parser("fixedcost", help="per-step fixed cost: small scenes against a large one")
     fc.add_argument("--particles", type=_positive, nargs="+", default=[2_000, 7_700, 8_000, 200_000],
                     help="particle counts of the blocks, timed round robin (default 2000 7700 8000 200000)")
@@ -66,8 +70,14 @@ def add_bench_parser(sub):
     fc.add_argument("--frame", nargs="*", default=["elastic"], choices=["elastic", "elastoplastic"],
                     help="variants of the main job's scene (cases/portal_frame.toml, 0.05 m) to time "
                          "beside the blocks (default elastic; none: --frame with no value)")
+    fc.add_argument("--output", action="store_true",
+                    help="also time the --frame variants with their output, as `pmpm run` runs them")
+    fc.add_argument("--output-steps", type=_positive, default=1500,
+                    help="with --output: runs of this many steps and twice as many (default 1500)")
     fc.add_argument("--whole-window", action="store_true",
                     help="also time every case with the grid tiles off (each node pass over the whole window)")
+    from pmpm.benchmarks import ranks
+    ranks.add_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
     from pmpm.benchmarks.accuracy import add_arguments
     add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
 
@@ -86,6 +96,9 @@ def main(args):
     if args.bench == "peer":
         from pmpm.benchmarks.peer import peer
         return peer(args)
+    if args.bench == "ranks":
+        from pmpm.benchmarks.ranks import ranks
+        return ranks(args)
     if args.bench == "effects":
         return effects(args)
     from pmpm.benchmarks.scaling import scaling

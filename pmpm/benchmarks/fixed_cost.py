@@ -54,10 +54,11 @@ def _cases(sizes, material, frames, whole_window):
 
 
 def measure(sizes, repeat, work, material="elastic", clock=time.process_time, frames=(),
-            whole_window=False):
+            whole_window=False, output_frames=(), output_steps=1500):
     """{(scene, particles, tiles on): [CPU seconds per step of each round]} of the block at each
     of ``sizes`` and the portal frame's ``frames`` variants (every case also with the tiles off
-    with ``whole_window``)."""
+    with ``whole_window``), and of the frame's ``output_frames`` variants run with their output
+    (:class:`FrameRun`, runs of ``output_steps`` and twice as many steps)."""
     cases = _cases(sizes, material, frames, whole_window)
     steps = [max(2, int(round(work / s.particles.n))) for _, _, s in cases]
     for (_, _, s), k in zip(cases, steps):  # first touch of the arrays, cache warm
@@ -66,13 +67,63 @@ def measure(sizes, repeat, work, material="elastic", clock=time.process_time, fr
     samples = {(label, s.particles.n, tiles): [] for label, tiles, s in cases}
     measure.defaults = {(label, s.particles.n): (s.default_tile, s.window.G.shape[0] * s.window.G.shape[1])
                         for label, _, s in cases}
-    for _ in range(repeat):
-        for (label, tiles, s), k in zip(cases, steps):
-            t0 = clock()
-            for _ in range(k):
-                s.step()
-            samples[label, s.particles.n, tiles].append((clock() - t0) / k)
+    runs = [FrameRun(v) for v in output_frames]
+    try:
+        for _ in range(repeat):
+            for (label, tiles, s), k in zip(cases, steps):
+                t0 = clock()
+                for _ in range(k):
+                    s.step()
+                samples[label, s.particles.n, tiles].append((clock() - t0) / k)
+            for run in runs:
+                t = run.cpu_per_step(output_steps, clock)
+                samples.setdefault((f"{FRAME} {run.variant} + output", run.n, None), []).append(t)
+    finally:
+        for run in runs:
+            run.close()
     return samples
+
+
+class FrameRun:
+    """The main job's elastic frame as ``pmpm run`` steps it, with its output (frames,
+    histories, tracked points, section cuts, reactions, energies, checkpoints) written into a
+    temporary folder. ``cpu_per_step(steps)`` is the process CPU time of a run of ``2 steps``
+    steps minus one of ``steps``, over ``steps``: the set-up, the final checkpoint and the
+    closing of the files cancel, what remains is what each step costs with its share of the
+    output's per-step work."""
+
+    def __init__(self, variant="elastic"):
+        import tempfile
+        self.tmp = tempfile.mkdtemp(prefix="pmpm_fixedcost_")
+        self.variant = variant
+        from pmpm.benchmarks.accuracy import FRAME_CASE
+        import shutil
+        self.case = shutil.copy(FRAME_CASE, self.tmp)
+        self.n = None  # known after the first run
+
+    def _run(self, steps, clock):
+        import os
+        from mpi4py import MPI
+        from pmpm.run import Run
+        from pmpm.scene.config import load_scene
+        cwd = os.getcwd()
+        os.chdir(self.tmp)  # the scene's output folder is relative to the working directory
+        try:
+            scene = load_scene(self.case, self.variant, overrides={"solver.max_steps": steps})[0]
+            run = Run(scene, MPI.COMM_SELF)
+            self.n = run.solver.particles.n
+            t0 = clock()
+            run.execute()
+            return clock() - t0
+        finally:
+            os.chdir(cwd)
+
+    def cpu_per_step(self, steps, clock=time.process_time):
+        return (self._run(2 * steps, clock) - self._run(steps, clock)) / steps
+
+    def close(self):
+        import shutil
+        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 def fit_fixed_cost(n, t):
@@ -105,20 +156,22 @@ def fixed_cost(args):
     """``pmpm bench fixedcost``: returns the exit code."""
     frames = getattr(args, "frame", ["elastic"])
     whole = getattr(args, "whole_window", False)
+    output = frames if getattr(args, "output", False) else ()
     samples = measure(args.particles, args.repeat, args.work, args.material, frames=frames,
-                      whole_window=whole)
+                      whole_window=whole, output_frames=output,
+                      output_steps=getattr(args, "output_steps", 1500))
     print(f"pmpm bench fixedcost: block (cubic MUSL {args.material})"
           f"{' and the portal frame (' + ', '.join(frames) + ', 0.05 m)' if frames else ''}, "
           f"{args.repeat} rounds, about "
           f"{args.work:.0f} particle-steps per sample, process CPU time, median")
-    print(f"{'scene':>18s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
+    print(f"{'scene':>24s} {'tiles':>6s} {'particles':>10s} {'us/step':>10s} {'ns/particle-step':>17s} "
           f"{'vs largest block':>17s} {'fastest rounds':>15s}")
     summary = {"material": args.material, "repeat": args.repeat, "work": args.work}
     name = {None: "auto", True: "on", False: "off"}
     for tiles in ((True, False) if whole else (None,)):
         rows, a, b = _rows(samples, tiles)
         for r in rows:
-            print(f"{r['scene']:>18s} {name[tiles]:>6s} {r['particles']:>10d} "
+            print(f"{r['scene']:>24s} {name[tiles]:>6s} {r['particles']:>10d} "
                   f"{r['us_per_step']:>10.1f} {r['ns_per_particle_step']:>17.1f} {r['ratio_to_largest']:>17.3f} {r['ratio_of_fastest']:>15.3f}")
         print(f"fit over the blocks (tiles {name[tiles]}) t = a + b n: fixed cost "
               f"a = {a * 1e6:.1f} us per step, b = {b * 1e9:.1f} ns per particle-step")
@@ -128,6 +181,10 @@ def fixed_cost(args):
         for r in rows:
             if r["scene"] != "block":
                 summary[r["scene"].replace(" ", "_") + key] = r
+    if output:
+        print(f"'+ output': the variant run as `pmpm run` runs it, with its frames, histories, tracks, "
+              f"sections, reactions, energies and checkpoints (runs of {args.output_steps} and "
+              f"{2 * args.output_steps} steps, their difference per step)")
     for (label, n), (tile, nodes) in measure.defaults.items():
         print(f"{label} ({n} particles, {nodes} window nodes, {nodes / n:.2f} per particle): the solver's "
               f"default is {'tiles of ' + str(tile) + ' nodes' if tile else 'the whole window'}")

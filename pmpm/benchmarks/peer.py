@@ -1,19 +1,28 @@
-"""``pmpm bench peer``: pmpm's cubic MUSL elastic step side by side with a JIT-compiled peer.
+"""``pmpm bench peer``: pmpm's cubic MUSL elastic step side by side with JIT-compiled peers.
 
-The peer is Taichi (``pip install taichi``; an optional dependency: the command says how to
-install it when it is missing) on its CPU backend with one thread and float64. Its program is
-written here, as a reference and not as pmpm code: a plain MUSL step on the same block, with
-the same particle count, cell size, time step, cubic B-splines and clamped base, the way a
-Taichi user writes it (one field per quantity, particle loops with atomic scatters):
+The peers are Taichi programs (``pip install taichi``; an optional dependency: the command says
+how to install it when it is missing) on Taichi's CPU backend with one thread and float64. They
+are written here, as references and not as pmpm code, on the same block with the same particle
+count, cell size, time step, elastic material and clamped base, the way a Taichi user writes
+them (one field per quantity, particle loops with atomic scatters):
+
+``musl`` (:class:`TaichiPeer`), the same work as pmpm's step, cubic B-splines::
 
     clear grid -> P2G (mass, momentum, internal force) -> grid update (v, dv, fixed base)
     -> G2P (FLIP velocity, move dt sum N v, MUSL re-map of m v) -> re-mapped grid velocity
     -> strain increment from it, elastic plane-stress update, volume -> move
 
-Both run in one process, pinned by the caller to one core (``taskset -c 0``), interleaved
-(pmpm, peer, pmpm, peer, ...), so a drift of a shared machine hits both alike; each sample is
-the process CPU time of ``--steps`` steps, and the figures are medians. The ratio is
-peer / pmpm time per particle-step: above 1 pmpm is faster.
+``mls_quadratic``, ``mls_cubic`` (:class:`TaichiMLSPeer`), MLS-MPM with APIC as Taichi's own
+MPM examples do it: one P2G (mass and affine momentum with the stress) and one G2P (velocity,
+affine matrix, stress, volume, move) per step, quadratic (the examples' choice) or cubic.
+
+Everything runs in one process, pinned by the caller to one core (``taskset -c 0``),
+interleaved (pmpm, peer 1, peer 2, ..., pmpm, ...), so a drift of a shared machine hits all
+alike; each sample is the process CPU time of ``--steps`` steps, and the figures are medians.
+A ratio is peer / pmpm time per particle-step: above 1 pmpm is faster. The command also prints
+the host's CPU model and pmpm's memory-bandwidth floor: the bytes its step must stream per
+particle (pmpm.benchmarks.throughput.step_bytes_per_particle) over this core's measured STREAM
+triad bandwidth, and the step's cost against it.
 """
 import json
 import math
@@ -23,7 +32,7 @@ import time
 
 from pmpm.benchmarks.block import block_scene
 
-__all__ = ["peer", "PmpmSide", "TaichiPeer", "interleave", "INSTALL_HINT"]
+__all__ = ["peer", "PmpmSide", "TaichiPeer", "TaichiMLSPeer", "PEERS", "interleave", "INSTALL_HINT"]
 
 INSTALL_HINT = ("pmpm bench peer needs the peer, Taichi (an optional dependency): "
                 "python -m pip install taichi")
@@ -33,14 +42,17 @@ WARM_STEPS = 10
 
 
 class PmpmSide:
-    """pmpm's step on the benchmark block (cubic, MUSL, elastic, one rank)."""
+    """pmpm's step on the benchmark block (cubic or ``shape``, MUSL, elastic, one rank)."""
 
     name = "pmpm"
 
-    def __init__(self, particles):
+    def __init__(self, particles, shape="cubic"):
         from mpi4py import MPI
         from pmpm.core.solver import Solver
-        self.scene = block_scene(particles, "cubic", "musl", "elastic")
+        if shape != "cubic":
+            self.name = f"pmpm_{shape}"
+        self.label = f"pmpm MUSL ({shape})"
+        self.scene = block_scene(particles, shape, "musl", "elastic")
         self.solver = Solver(self.scene, MPI.COMM_SELF)
         self.n = self.solver.particles.n
 
@@ -62,32 +74,54 @@ def _block_geometry(scene):
                 dt=scene.solver.cfl * g.cell_size / c)
 
 
+def _block_particles(geo):
+    """Positions (n, 2) and initial velocities of the block's particles: the centres of a
+    ppc x ppc sub-grid of each cell, in cell order, with pmpm's shear velocity field."""
+    import numpy as np
+    h, ppc = geo["h"], geo["ppc"]
+    nbx = int(round((geo["x1"] - geo["x0"]) / h))
+    nby = int(round(geo["height"] / h))
+    sub = (np.arange(ppc) + 0.5) / ppc
+    cx = (np.arange(nbx)[:, None] + sub[None, :]).ravel() * h + geo["x0"]
+    cy = (np.arange(nby)[:, None] + sub[None, :]).ravel() * h
+    X, Y = np.meshgrid(cx, cy, indexing="ij")
+    pos = np.column_stack([X.ravel(), Y.ravel()])
+    vel = np.column_stack([2.0 * pos[:, 1] / geo["height"], np.zeros(len(pos))])
+    return pos, vel
+
+
+_taichi_started = False
+
+
+def _taichi(fresh=False):
+    """Taichi on its CPU backend, one thread, float64. Taichi has one runtime per process:
+    ``fresh`` starts a new one (freeing every field); the programs of one comparison share it."""
+    global _taichi_started
+    import taichi as ti
+    if fresh or not _taichi_started:
+        ti.reset()
+        ti.init(arch=ti.cpu, cpu_max_num_threads=1, default_fp=ti.f64, default_ip=ti.i32,
+                log_level=ti.WARN, offline_cache=True)
+        _taichi_started = True
+    return ti
+
+
 class TaichiPeer:
     """The peer's MUSL step in Taichi (CPU, one thread, float64) on the block of
     ``block_scene(particles)``; see the module docstring."""
 
     name = "taichi"
+    label = "Taichi MUSL (cubic)"
 
     def __init__(self, particles):
         import numpy as np
-        import taichi as ti
-        ti.reset()
-        ti.init(arch=ti.cpu, cpu_max_num_threads=1, default_fp=ti.f64, default_ip=ti.i32,
-                log_level=ti.WARN, offline_cache=True)
+        ti = _taichi()
         geo = _block_geometry(block_scene(particles, "cubic", "musl", "elastic"))
         h, ppc = geo["h"], geo["ppc"]
-        # particles at the centres of a ppc x ppc sub-grid of each cell of the block, in cell order
-        nbx = int(round((geo["x1"] - geo["x0"]) / h))
-        nby = int(round(geo["height"] / h))
-        sub = (np.arange(ppc) + 0.5) / ppc
-        cx = (np.arange(nbx)[:, None] + sub[None, :]).ravel() * h + geo["x0"]
-        cy = (np.arange(nby)[:, None] + sub[None, :]).ravel() * h
-        X, Y = np.meshgrid(cx, cy, indexing="ij")
-        pos = np.column_stack([X.ravel(), Y.ravel()])
+        pos, vel = _block_particles(geo)
         n = len(pos)
         self.n = n
         vol0 = (h / ppc) ** 2
-        vel = np.column_stack([2.0 * pos[:, 1] / geo["height"], np.zeros(n)])
         # the grid, padded by 2 nodes on every side so every cubic support is whole (the
         # block's base sits on the grid's edge; pmpm uses boundary-modified splines there)
         pad = 2
@@ -247,6 +281,162 @@ class TaichiPeer:
         return float(0.5 * (self.m.to_numpy() * (v * v).sum(axis=1)).sum())
 
 
+class TaichiMLSPeer:
+    """An MLS-MPM step in Taichi the way Taichi's own MPM examples (mpm88, mpm99) write it:
+    APIC transfers with the affine matrix C, one P2G and one G2P per step, B-spline weights of
+    ``order`` 2 (quadratic, the examples' choice) or 3 (cubic). Same block, particle count,
+    cell size, time step and clamped base as pmpm's; the stress is pmpm's: a plane-stress
+    linear elastic increment from the strain rate sym(C) (hypoelastic, small strain), the
+    volume from tr(C). Per step::
+
+        clear grid (m, m v) -> P2G (m, m v + (m C - dt V D^-1 sigma)(x_i - x_p))
+        -> grid update (v = m v / m, fixed base) -> G2P (v, C, sigma, V, x)
+
+    with D^-1 = 4 / h^2 (quadratic) or 3 / h^2 (cubic), the MLS-MPM inertia tensor's inverse.
+    """
+
+    def __init__(self, particles, order=2):
+        import numpy as np
+        ti = _taichi()
+        self.order = order
+        self.name = f"taichi_mls_{'quadratic' if order == 2 else 'cubic'}"
+        self.label = f"Taichi MLS-MPM APIC ({'quadratic' if order == 2 else 'cubic'})"
+        geo = _block_geometry(block_scene(particles, "cubic", "musl", "elastic"))
+        h, ppc = geo["h"], geo["ppc"]
+        pos, vel = _block_particles(geo)
+        n = self.n = len(pos)
+        vol0 = (h / ppc) ** 2
+        pad = 2  # every support whole on the padded grid (see TaichiPeer)
+        gx, gy = geo["ncx"] + 1 + 2 * pad, geo["ncy"] + 1 + 2 * pad
+        f64 = ti.f64
+        self.x = ti.Vector.field(2, f64, n)
+        self.v = ti.Vector.field(2, f64, n)
+        self.C = ti.Matrix.field(2, 2, f64, n)
+        self.stress = ti.Vector.field(3, f64, n)
+        self.vol = ti.field(f64, n)
+        self.m = ti.field(f64, n)
+        self.gm = ti.field(f64, (gx, gy), offset=(-pad, -pad))
+        self.gv = ti.Vector.field(2, f64, (gx, gy), offset=(-pad, -pad))
+        self.x.from_numpy(pos)
+        self.v.from_numpy(vel)
+        self.vol.from_numpy(np.full(n, vol0))
+        self.m.from_numpy(np.full(n, vol0 * geo["rho"]))
+        self.stress.from_numpy(np.zeros((n, 3)))
+        self.C.from_numpy(np.zeros((n, 2, 2)))
+        self._kernels(ti, geo)
+
+    def _kernels(self, ti, geo):
+        x, v, C, stress, vol, m, gm, gv = self.x, self.v, self.C, self.stress, self.vol, self.m, self.gm, self.gv
+        h = geo["h"]
+        inv_h = 1.0 / h
+        dt = geo["dt"]
+        E, nu = geo["E"], geo["nu"]
+        d11 = E / (1 - nu * nu)
+        d12 = nu * d11
+        d33 = 0.5 * (1 - nu) * d11
+        cutoff = 1e-12 * geo["rho"] * h ** 2
+        K = self.order + 1                       # nodes per axis
+        Dinv = (4.0 if self.order == 2 else 3.0) * inv_h * inv_h
+
+        @ti.func
+        def stencil(s):
+            # base node and weights of the quadratic (3 nodes) or cubic (4 nodes) B-spline
+            base = ti.Vector([0, 0])
+            fx = ti.Vector.zero(ti.f64, 2)
+            w = ti.Matrix.zero(ti.f64, K, 2)
+            if ti.static(self.order == 2):
+                base = ti.cast(s - 0.5, ti.i32)
+                fx = s - base
+                for a in ti.static(range(2)):
+                    w[0, a] = 0.5 * (1.5 - fx[a]) ** 2
+                    w[1, a] = 0.75 - (fx[a] - 1.0) ** 2
+                    w[2, a] = 0.5 * (fx[a] - 0.5) ** 2
+            else:
+                base = ti.cast(ti.floor(s), ti.i32) - 1
+                fx = s - base
+                for a in ti.static(range(2)):
+                    for d in ti.static(range(4)):
+                        r = ti.abs(fx[a] - d)
+                        if r < 1.0:
+                            w[d, a] = 0.5 * r * r * r - r * r + 2.0 / 3.0
+                        elif r < 2.0:
+                            t = 2.0 - r
+                            w[d, a] = t * t * t / 6.0
+            return base, fx, w
+
+        @ti.kernel
+        def clear():
+            for I in ti.grouped(gm):
+                gm[I] = 0.0
+                gv[I] = ti.Vector.zero(ti.f64, 2)
+
+        @ti.kernel
+        def p2g():
+            for p in x:
+                base, fx, w = stencil(x[p] * inv_h)
+                sig = stress[p]
+                S = ti.Matrix([[sig[0], sig[2]], [sig[2], sig[1]]])
+                affine = m[p] * C[p] - (dt * vol[p] * Dinv) * S
+                mv = m[p] * v[p]
+                for i, j in ti.static(ti.ndrange(K, K)):
+                    offset = ti.Vector([i, j])
+                    dpos = (offset - fx) * h
+                    weight = w[i, 0] * w[j, 1]
+                    gv[base + offset] += weight * (mv + affine @ dpos)
+                    gm[base + offset] += weight * m[p]
+
+        @ti.kernel
+        def grid_update():
+            for I in ti.grouped(gm):
+                mi = gm[I]
+                if mi > cutoff and I[1] != 0:  # the clamped base
+                    gv[I] = gv[I] / mi
+                else:
+                    gv[I] = ti.Vector.zero(ti.f64, 2)
+
+        @ti.kernel
+        def g2p():
+            for p in x:
+                base, fx, w = stencil(x[p] * inv_h)
+                new_v = ti.Vector.zero(ti.f64, 2)
+                new_C = ti.Matrix.zero(ti.f64, 2, 2)
+                for i, j in ti.static(ti.ndrange(K, K)):
+                    offset = ti.Vector([i, j])
+                    dpos = (offset - fx) * h
+                    weight = w[i, 0] * w[j, 1]
+                    g_v = gv[base + offset]
+                    new_v += weight * g_v
+                    new_C += (Dinv * weight) * g_v.outer_product(dpos)
+                v[p] = new_v
+                C[p] = new_C
+                exx = dt * new_C[0, 0]
+                eyy = dt * new_C[1, 1]
+                gxy = dt * (new_C[0, 1] + new_C[1, 0])
+                stress[p] += ti.Vector([d11 * exx + d12 * eyy, d12 * exx + d11 * eyy, d33 * gxy])
+                vol[p] *= 1.0 + exx + eyy
+                x[p] += dt * new_v
+
+        self._sync = ti.sync
+        self._phases = (clear, p2g, grid_update, g2p)
+
+    def run(self, steps):
+        for _ in range(steps):
+            for k in self._phases:
+                k()
+        self._sync()
+
+    def kinetic_energy(self):
+        """Sum of 1/2 m v^2 (for the test that the peer's program is a working MPM step)."""
+        v = self.v.to_numpy()
+        return float(0.5 * (self.m.to_numpy() * (v * v).sum(axis=1)).sum())
+
+
+#: the peers ``pmpm bench peer`` runs: name -> constructor(particles)
+PEERS = {"musl": TaichiPeer,
+         "mls_quadratic": lambda n: TaichiMLSPeer(n, order=2),
+         "mls_cubic": lambda n: TaichiMLSPeer(n, order=3)}
+
+
 def interleave(sides, steps, repeat, clock=time.process_time):
     """Run ``steps`` steps of every side in turn, ``repeat`` rounds; returns {name: [ns per
     particle-step of each round]}."""
@@ -259,6 +449,16 @@ def interleave(sides, steps, repeat, clock=time.process_time):
     return samples
 
 
+def _floor(solver):
+    """(bytes per particle-step, measured bandwidth in bytes/s, floor in ns per particle-step):
+    the bytes pmpm's step must stream (pmpm.benchmarks.throughput.step_bytes_per_particle) over
+    this core's STREAM-triad bandwidth."""
+    from pmpm.benchmarks.throughput import step_bytes_per_particle, stream_triad_bandwidth
+    nbytes = step_bytes_per_particle(solver)
+    bandwidth = stream_triad_bandwidth()
+    return nbytes, bandwidth, nbytes / bandwidth * 1e9
+
+
 def peer(args):
     """``pmpm bench peer``: returns the exit code."""
     try:
@@ -266,24 +466,46 @@ def peer(args):
     except ImportError:
         print(f"pmpm: error: {INSTALL_HINT}", file=sys.stderr)
         return 2
+    from pmpm.benchmarks.cpuinfo import cpu_model
+    names = getattr(args, "peers", None) or list(PEERS)
+    print(f"pmpm bench peer: {cpu_model()}; peers {', '.join(names)}; CPU time, medians of "
+          f"{args.repeat} rounds of {args.steps} steps, interleaved", flush=True)
     results = []
     for n in args.particles:
-        sides = [PmpmSide(n), TaichiPeer(n)]
-        for s in sides:  # compile (the peer), first touch of the arrays
+        _taichi(fresh=True)
+        # pmpm with the quadratic MLS program's stencil too: the same node count per particle
+        extra = [PmpmSide(n, "quadratic")] if "mls_quadratic" in names else []
+        sides = [PmpmSide(n)] + extra + [PEERS[k](n) for k in names]
+        for s in sides:  # compile (the peers), first touch of the arrays
             s.run(WARM_STEPS)
         samples = interleave(sides, args.steps, args.repeat)
-        pm, pe = (statistics.median(samples[s.name]) for s in sides)
-        ratios = [b / a for a, b in zip(samples["pmpm"], samples["taichi"])]
-        res = {"particles": {"pmpm": sides[0].n, "taichi": sides[1].n}, "steps": args.steps,
-               "repeat": args.repeat, "pmpm_ns_per_particle_step": pm, "peer_ns_per_particle_step": pe,
-               "ratio_peer_over_pmpm": pe / pm, "ratio_per_round": ratios,
-               "samples_ns": samples}
-        print(f"{sides[0].n:>9d} particles (peer {sides[1].n}), {args.steps} steps x {args.repeat} rounds, "
-              f"CPU time, median: pmpm {pm:.1f} ns/particle-step, taichi {pe:.1f} ns/particle-step, "
-              f"ratio taichi/pmpm {pe / pm:.2f} (rounds {min(ratios):.2f}-{max(ratios):.2f})", flush=True)
+        pm = statistics.median(samples["pmpm"])
+        nbytes, bandwidth, floor = _floor(sides[0].solver)
+        res = {"particles": {s.name: s.n for s in sides}, "steps": args.steps, "repeat": args.repeat,
+               "pmpm_ns_per_particle_step": pm, "bytes_per_particle_step": nbytes,
+               "stream_bandwidth_GB_s": bandwidth / 1e9, "floor_ns_per_particle_step": floor,
+               "pmpm_over_floor": pm / floor, "peers": {}, "samples_ns": samples}
+        print(f"{sides[0].n:>9d} particles: pmpm {pm:.1f} ns/particle-step; memory floor "
+              f"{floor:.1f} ns ({nbytes:.0f} bytes per particle-step at {bandwidth / 1e9:.1f} GB/s "
+              f"STREAM triad): pmpm's step is {pm / floor:.1f} x the floor", flush=True)
+        for s in sides[1 + len(extra):]:
+            pe = statistics.median(samples[s.name])
+            ratios = [b / a for a, b in zip(samples["pmpm"], samples[s.name])]
+            res["peers"][s.name] = {"label": s.label, "particles": s.n, "ns_per_particle_step": pe,
+                                    "ratio_peer_over_pmpm": pe / pm, "ratio_per_round": ratios}
+            print(f"{'':>9s} {s.label:<34s} {pe:8.1f} ns/particle-step ({s.n} particles): "
+                  f"peer/pmpm {pe / pm:.2f} (rounds {min(ratios):.2f}-{max(ratios):.2f})", flush=True)
+            if s.name == "taichi_mls_quadratic" and extra:
+                q = statistics.median(samples[extra[0].name])
+                rq = [b / a for a, b in zip(samples[extra[0].name], samples[s.name])]
+                res["peers"][s.name].update(pmpm_quadratic_ns_per_particle_step=q,
+                                            ratio_peer_over_pmpm_quadratic=pe / q)
+                print(f"{'':>9s} {'  against pmpm MUSL (quadratic)':<34s} {q:8.1f} ns/particle-step: "
+                      f"peer/pmpm {pe / q:.2f} (rounds {min(rq):.2f}-{max(rq):.2f})", flush=True)
         results.append(res)
         del sides
     import taichi as ti
-    print(json.dumps({"peer": f"taichi {'.'.join(map(str, ti.__version__))} cpu, 1 thread, f64, cubic MUSL",
+    print(json.dumps({"cpu_model": cpu_model(),
+                      "peer": f"taichi {'.'.join(map(str, ti.__version__))} cpu, 1 thread, f64",
                       "clock": "process CPU time", "results": results}))
     return 0

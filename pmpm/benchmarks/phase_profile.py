@@ -3,7 +3,10 @@ throughput --phases``).
 
 The kernels are wrapped for the duration of the measurement only: the solver calls them through
 the ``pmpm.core.kernels`` module and through its materials' ``update_stress``, so those are the
-names replaced, then restored.
+names replaced, then restored. So are the places where the ranks wait for each other: the halo
+rounds (``sum_halo``: on several ranks mostly the wait for the neighbour), the step-end
+reduction's wait (``wait_all`` in the solver) and the migration; on one rank they cost next to
+nothing (``pmpm bench ranks --phases`` runs this on 1 and 2 ranks, idle and loaded).
 """
 import collections
 import contextlib
@@ -51,6 +54,10 @@ def phase_times(solver, steps):
             stack.enter_context(_timed(K, name, totals))
         for material in solver.materials:
             stack.enter_context(_timed(material, "update_stress", totals))
+        import pmpm.core.solver as solver_module
+        stack.enter_context(_timed(solver_module, "wait_all", totals))   # the step-end reduction
+        for name in ("sum_halo", "migrate"):
+            stack.enter_context(_timed(solver.decomp, name, totals))
         t0 = time.perf_counter()
         for _ in range(steps):
             solver.step()

@@ -9,6 +9,13 @@ method here that calls one numba kernel or one exchange::
 
 The serial run is the one-rank case of the same code: the halo exchange and the migration are
 no-ops there, nothing else changes.
+
+Where the ranks wait for each other (docs/performance.md, "Synchronisation points"): each
+halo exchange is one round with the neighbours (``SlabDecomposition.sum_halo``: the ghost sums
+and the owners' totals in one message each way), and the step's end is one reduction of the
+next time step's speed and every rank's troubles, which carries the energy check's sums on the
+steps that check (``_check_and_next_dt``). A MUSL step on several ranks: two halo rounds and
+one reduction.
 """
 import logging
 import math
@@ -17,7 +24,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from decomposition import alltoallv_fields, get_comm
+from decomposition import alltoallv_fields, get_comm, wait_all
 from pmpm.core import kernels as K
 from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, face_node_sets
 from pmpm.errors import ParticleExitError, UnstableRunError
@@ -257,10 +264,9 @@ class Solver:
             K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *self._geometry())
 
     def exchange_halo(self, fields):
-        """HALO: ghost contributions summed into the owners, owners' totals copied back."""
-        view = self.window.G[..., fields]
-        self.decomp.accumulate(view)
-        self.decomp.fill(view)
+        """HALO: every rank's contributions summed in the owned and the ghost columns alike
+        (one round with each neighbour)."""
+        self.decomp.sum_halo(self.window.G[..., fields])
 
     def update_grid(self, dt):
         """Steps 7-8 / eq. 3-4: (mv) += f dt (with damping if asked), essential BCs (moving
@@ -372,8 +378,10 @@ class Solver:
             K.rotate(t, self._dq)
 
     # -- after the phases ---------------------------------------------------------------------
-    def _check_and_next_dt(self):
-        """One allreduce: the next time step (min over ranks) and every rank's troubles."""
+    def _check_and_next_dt(self, energy_due=False):
+        """One rendezvous of the ranks: the next time step's speed (max over ranks) and every
+        rank's troubles, and (``energy_due``) the energy check's sums in the same wait.
+        Returns (bad, outside, leaving, summed energies or None)."""
         g, d = self.grid, self.decomp
         c0, c1 = d.owned
         outside, leaving, inverted = K.count_strays(
@@ -384,13 +392,16 @@ class Solver:
         bad_F, self._first_bad_F = K.check_deformation(self.particles["F"]) if self.keeps_F else (0, -1)
         escaped, self._first_escaped = int(self._corner_escape[0]), int(self._corner_escape[1])
         self._corner_escape[:] = (0, -1)
-        flags = d.allreduce_max(np.array([vmax, bad, outside, leaving, bad_F, escaped], dtype=np.float64))
+        sums = d.start_allreduce(self.local_energies(), MPI.SUM) if energy_due else None
+        flags = d.start_allreduce(np.array([vmax, bad, outside, leaving, bad_F, escaped], dtype=np.float64))
+        wait_all(flags.requests + (sums.requests if sums is not None else []))
+        flags = flags.result()
         self.vmax = flags[0]
         if flags[4]:
             raise UnstableRunError(self._bad_F_report())
         if flags[5]:
             raise UnstableRunError(self._escaped_corner_report())
-        return int(flags[1]), int(flags[2]), int(flags[3])
+        return int(flags[1]), int(flags[2]), int(flags[3]), (sums.result() if sums is not None else None)
 
     def _bad_F_report(self):
         """The message of a deformation gradient that turned singular, inverted or non-finite:
@@ -478,13 +489,14 @@ class Solver:
             dt = remaining
         self._dt_step = dt
         self.scheme.advance(self, dt)
-        bad, outside, leaving = self._check_and_next_dt()
+        energy_due = (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0
+        bad, outside, leaving, sums = self._check_and_next_dt(energy_due)
         if bad:
             raise UnstableRunError(f"non-finite velocity or inverted volume at t = {self.t + dt:.6g} s "
                                    f"(step {self.step_count + 1}, dt = {dt:.3g} s; the stable step is "
                                    f"about {self.critical_dt():.3g} s)")
-        if outside or (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0:
-            self.check_energy(dt)
+        if outside or energy_due:
+            self.check_energy(dt, summed=sums)
         if outside:
             if cfg.on_particle_exit == "error":
                 raise ParticleExitError(f"{outside} particle(s) left the grid at t = {self.t + dt:.6g} s: "
@@ -498,12 +510,13 @@ class Solver:
         self.dt = self.stable_dt(self.vmax)
         return dt
 
-    def check_energy(self, dt, pending=True):
+    def check_energy(self, dt, pending=True, summed=None):
         """Stop a run whose energy grows beyond what the loads put in (a diverging run grows
         exponentially; a healthy one stays within a few percent). ``pending``: called inside
-        a step of ``dt`` not yet counted (else on the state at ``self.t``)."""
+        a step of ``dt`` not yet counted (else on the state at ``self.t``). ``summed``: the
+        energies' sums over the ranks already reduced (``local_energies``), else reduced here."""
         t_now, step_now = (self.t + dt, self.step_count + 1) if pending else (self.t, self.step_count)
-        e = self.energies()
+        e = self.energies(summed)
         supplied = self.initial_energy + e["external_work"]
         scale = abs(self.initial_energy) + abs(e["external_work"]) + abs(e["internal_work"])
         # kinetic energy alone as well: a diverging run can turn volumes (and the internal work
@@ -529,12 +542,21 @@ class Solver:
         self.check_energy(self.dt, pending=False)
 
     # -- reporting ----------------------------------------------------------------------------
-    def energies(self):
+    def energies(self, summed=None):
         """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
         work, internal work (integrated stress power: strain + dissipation, exact for any
         material), external work, damping work, and ``total`` = kinetic + internal work +
         damping work, which equals the external work plus the initial kinetic energy when the
-        run conserves energy."""
+        run conserves energy. ``summed``: ``local_energies()`` already summed over the ranks
+        (by a reduction shared with other figures), else summed here (collective)."""
+        if summed is None:
+            summed = self.decomp.allreduce_sum(self.local_energies())
+        ke, se, pw, wi, we, wd = summed
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
+                "external_work": we, "damping_work": wd, "total": ke + wi + wd}
+
+    def local_energies(self):
+        """This rank's shares of the energies, in the order ``energies`` reads them."""
         p = self.particles
         kinetic = K.kinetic_energy(p["m"], p["v"])
         several = len(self.materials) > 1
@@ -545,7 +567,4 @@ class Solver:
                      K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
                      for k, m in enumerate(self.materials))
         plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
-        ke, se, pw, wi, we, wd = self.decomp.allreduce_sum(
-            np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work]))
-        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "total": ke + wi + wd}
+        return np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work])

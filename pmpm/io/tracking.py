@@ -57,6 +57,14 @@ class Tracker:
     def sample(self):
         """(n_tracks, len(HISTORY_COLUMNS)) values, identical on every rank: the owner's row,
         zeros elsewhere, summed over the ranks (no reduction on one rank)."""
+        out = self.local_rows()
+        if not len(self.ids) or self.solver.comm.Get_size() == 1:
+            return out
+        return self.solver.decomp.allreduce_sum(out)
+
+    def local_rows(self):
+        """This rank's part of :meth:`sample`: the rows of the followed particles it owns, zeros
+        for the others (a caller may sum it over the ranks with other figures in one reduction)."""
         out = np.zeros((len(self.ids), len(HISTORY_COLUMNS)))
         p = self.solver.particles
         if len(self.ids) and p.n:
@@ -66,9 +74,7 @@ class Tracker:
                 if r >= 0:
                     x, x0, v, s = p["x"][r], p["x0"][r], p["v"][r], p["stress"][r]
                     out[k] = (x[0] - x0[0], x[1] - x0[1], v[0], v[1], x[0], x[1], s[0], s[1], s[2])
-        if not len(self.ids) or self.solver.comm.Get_size() == 1:
-            return out
-        return self.solver.decomp.allreduce_sum(out)
+        return out
 
 
 def _min_op():

@@ -139,8 +139,7 @@ class ContactSolver(Solver):
 
     def exchange_halo(self, fields):
         for view in self._halo_views(fields):
-            self.decomp.accumulate(view)
-            self.decomp.fill(view)
+            self.decomp.sum_halo(view)
 
     def update_grid(self, dt):
         """Contact correction of the mapped momenta, each slot's momentum update with its BCs,

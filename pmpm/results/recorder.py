@@ -32,18 +32,44 @@ class StructuralRecorder:
         self.reactions = solver.reactions
         self.reaction_names = self.reactions.names if self.reactions is not None else []
         self._phi, self._phi_of = None, None
+        # the cuts' band particles by id (all ranks), found once: _band_table
+        self._band = self._band_table() if self.cuts else None
         self.rows = []   # (t, sections (n, 3), reactions (m, 3))
         if self.reactions is not None:
             self.reactions.since = solver.t  # impulses are summed from the start (or restart)
 
+    def _band_table(self):
+        """(ids, phi): every particle in any cut's band, over all ranks, sorted by id, with its
+        band fraction in each cut (n_band, n_cuts). A band fraction depends on the particle's
+        initial position and body only, so it is found once, at the start (collective)."""
+        p, nc = self.solver.particles, len(self.cuts)
+        phi = (np.stack([c.weights(p["x0"], p["body"]) for c in self.cuts], axis=1)
+               if p.n else np.zeros((0, nc)))
+        keep = phi.any(axis=1)
+        parts = self.solver.comm.allgather((p["id"][keep], phi[keep]))
+        ids = np.concatenate([a for a, _ in parts])
+        phi = np.concatenate([b for _, b in parts]).reshape(-1, nc)
+        order = np.argsort(ids)
+        return ids[order], phi[order]
+
     def _weights(self):
-        """Band fractions of every cut for the local particles, found again only when the
-        particle arrays were replaced (sorting, migration, removal)."""
+        """Band fractions of every cut for the local particles, [(rows, phi)] per cut, rows in
+        increasing order: looked up by id in the band table again only when the particle arrays
+        were replaced (sorting, migration, removal), which costs one search of the band's few
+        ids instead of the cuts' geometry over every particle."""
         p = self.solver.particles
+        if not self.cuts:
+            return []
         if self._phi_of is not p["id"]:
-            self._phi = [(np.flatnonzero(w), w[w > 0]) for w in
-                         (c.weights(p["x0"], p["body"]) for c in self.cuts)]
-            self._phi_of = p["id"]
+            band_ids, band_phi = self._band
+            ids = p["id"]
+            rows = np.zeros(0, dtype=np.int64)
+            if len(band_ids) and len(ids):
+                at = np.minimum(np.searchsorted(band_ids, ids), len(band_ids) - 1)
+                rows = np.flatnonzero(band_ids[at] == ids)
+            phi = band_phi[at[rows]] if rows.size else np.zeros((0, len(self.cuts)))
+            self._phi = [(rows[phi[:, k] > 0], phi[phi[:, k] > 0, k]) for k in range(len(self.cuts))]
+            self._phi_of = ids
         return self._phi
 
     def local_sections(self):
@@ -54,14 +80,22 @@ class StructuralRecorder:
             out[k] = cut.resultants(p["x"][idx], p["stress"][idx], p["vol"][idx], phi)
         return out
 
-    def sample(self):
-        """Record one row at the solver's time; returns (sections, reactions) arrays."""
-        s = self.solver
-        nc = len(self.cuts)
+    def local_rows(self):
+        """This rank's partial sums of one sample, flat: the cuts' N, V, M, then the reactions'
+        impulse sums (a caller may reduce them with other figures in one reduction)."""
         local = [self.local_sections()]
         if self.reactions is not None:
             local.append(self.reactions.sums.copy())
-        total = s.decomp.allreduce_sum(np.concatenate(local).ravel()).reshape(-1, 3)
+        return np.concatenate(local).ravel()
+
+    def sample(self, summed=None):
+        """Record one row at the solver's time; returns (sections, reactions) arrays.
+        ``summed``: :meth:`local_rows` already summed over the ranks, else summed here."""
+        s = self.solver
+        nc = len(self.cuts)
+        if summed is None:
+            summed = s.decomp.allreduce_sum(self.local_rows())
+        total = np.asarray(summed).reshape(-1, 3)
         sections = total[:nc]
         reactions = (self.reactions.take(s.t, None, summed=total[nc:])
                      if self.reactions is not None else np.zeros((0, 3)))

@@ -93,6 +93,84 @@ def test_halo_sums_equal_serial_sums(axis, ghost, layout, dtype):
     assert everywhere(not storage[..., 0].any() and not storage[..., 4].any())
 
 
+def _double_bounds(ncols, size, ghost):
+    """Every slab exactly ``2 ghost`` wide except the last: the narrowest one-round layout."""
+    return np.array([2 * ghost * r for r in range(size)] + [ncols])
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+@pytest.mark.parametrize("ghost", [1, 2])
+@pytest.mark.parametrize("layout", ["block", "tight", "double"])
+def test_one_round_halo_equals_accumulate_then_fill_bit_for_bit(axis, ghost, layout):
+    """sum_halo (one message each way, a pending reduction completed in the same wait) leaves
+    every window column as accumulate + fill do, to the bit: random values of mixed
+    magnitudes, so a sum in another order or with a contribution missing would differ."""
+    n_nodes = (17, 5) if axis == 0 else (4, 17)
+    bounds = {"tight": _tight_bounds, "double": _double_bounds}.get(layout, lambda *a: None)(17, comm.size, ghost)
+    decomp = SlabDecomposition(comm, n_nodes, axis=axis, ghost=ghost, bounds=bounds)
+    # a column lies in three windows only where an inner slab is narrower than 2 ghost
+    widths = np.diff(decomp.bounds)[1:-1]
+    assert everywhere(decomp.one_round_halo == bool(widths.size == 0 or widths.min() >= 2 * ghost))
+    rng = np.random.default_rng(100 + decomp.rank)
+    storage = np.zeros(decomp.window_shape + (6,))
+    storage[..., 1:5] = rng.standard_normal(decomp.window_shape + (4,)) * 10.0 ** rng.integers(-8, 8, decomp.window_shape + (4,))
+    two = storage.copy()
+    decomp.accumulate(two[..., 1:5])
+    decomp.fill(two[..., 1:5])
+    cols, rows = _window_nodes(decomp)
+    cols, rows = cols[..., None], rows[..., None]
+    one = storage.copy()
+    one[..., 1:5] = _value(cols, rows, decomp.rank, np.arange(4))
+    decomp.sum_halo(one[..., 1:5])   # the exact serial sums first (the deterministic values)
+    assert everywhere(np.array_equal(one[..., 1:5], _full_sum(decomp, cols, rows, np.arange(4))))
+    one = storage.copy()
+    waits = decomp.waits["halo"]
+    pending = decomp.start_allreduce(np.array([float(decomp.rank), -float(decomp.rank)]), MPI.MAX)
+    decomp.sum_halo(one[..., 1:5], pending=pending)
+    assert everywhere(pending.done and np.array_equal(pending.result(), [comm.size - 1.0, 0.0]))
+    assert everywhere(np.array_equal(one, two))
+    rounds = 0 if decomp.size == 1 else (1 if decomp.one_round_halo else 2)
+    assert everywhere(decomp.waits["halo"] - waits == rounds)
+
+
+@parallel_only
+def test_a_wait_for_a_late_neighbour_sleeps_instead_of_polling(monkeypatch):
+    """A rank whose neighbour is 0.2 s late waits in naps (decomposition/waiting.py), not by
+    polling: it sleeps, at least the 5 growing naps (10 + 20 + 40 + 80 + 160 us) a wait longer
+    than 0.15 s must pass through whatever the machine's load (a nap lasts at least its
+    length; a loaded machine makes them longer, so fewer), and the exchange completes with the
+    right sums. Polling (PMPM_MPI_WAIT=spin) naps never."""
+    import time
+    from decomposition import waiting
+    decomp = SlabDecomposition(comm, (11, 4), axis=0, ghost=2)
+    decomp.sum_halo(np.ones(decomp.window_shape))  # connections set up
+    naps = []
+    real_sleep = time.sleep
+
+    def counted(seconds):
+        naps.append(seconds)
+        real_sleep(seconds)
+
+    monkeypatch.setattr(waiting, "time", type("clock", (), {"sleep": staticmethod(counted),
+                                                             "perf_counter": time.perf_counter}))
+    comm.Barrier()
+    late = decomp.rank == 0
+    if late:
+        real_sleep(0.2)
+    arr = np.ones(decomp.window_shape)
+    wall0 = time.perf_counter()
+    decomp.sum_halo(arr)
+    wall = time.perf_counter() - wall0
+    cols = np.arange(*decomp.window)
+    shared = np.array([sum(lo <= c < hi for lo, hi in zip(np.maximum(decomp.bounds[:-1] - 2, 0),
+                                                           np.minimum(decomp.bounds[1:] + 2, 11)))
+                       for c in cols], dtype=float)
+    assert everywhere(np.array_equal(arr, np.broadcast_to(shared[:, None], arr.shape)))
+    waited = decomp.rank == 1 and wall > 0.15
+    assert everywhere(not waited or len(naps) >= 5)
+    assert everywhere(decomp.rank != 1 or wall > 0.15)  # rank 1 did wait for rank 0
+
+
 # ----------------------------------------------------------------------- migration
 def _particles(decomp, n_local, rng):
     """Particles in this rank's owned cells, with ids unique over all ranks."""
