@@ -294,9 +294,9 @@ class SlabDecomposition:
             lo = slice(s["ghost_lo"].start, s["edge_lo"].stop)
             hi = slice(s["edge_hi"].start, s["ghost_hi"].stop)
             got = self._halo_exchange(arr, (lo, hi), (lo, hi), also)
-            for buf, cols in zip(got, (lo, hi)):
+            for buf, shared in zip(got, (lo, hi)):
                 if buf is not None:
-                    self._columns(arr, cols)[...] += buf
+                    self._columns(arr, shared)[...] += buf
         if pending is not None:
             pending.done = True
 

@@ -59,7 +59,6 @@ def add_arguments(p):
                    help="time the phases of the step on every rank instead (solver only)")
     p.add_argument("--count-calls", action="store_true",
                    help="also count the MPI calls per step (a PMPI shim built with mpicc)")
-    p.add_argument("--child", nargs=2, metavar=("MODE", "OUT"), help=__import__("argparse").SUPPRESS)
 
 
 # -- the background load ------------------------------------------------------------------------
@@ -100,7 +99,10 @@ def _mpirun(k, bind, args, env=None):
             cmd.append("--oversubscribe")
         mode, steps = args
         cmd += [sys.executable, "-m", "pmpm.benchmarks.ranks", "--child", mode, out, "--steps", steps]
-        proc = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        # an explicit environment: with env=None the child inherits the C-level one, where an
+        # MPI already initialised in this process (a singleton, as under pytest) has put its own
+        # PMIx variables, and the new mpirun then fails without a word
+        proc = subprocess.run(cmd, env=dict(os.environ) if env is None else env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         if proc.returncode != 0 or not os.path.exists(out):
             raise RuntimeError(f"{' '.join(cmd)} failed (exit {proc.returncode}):\n{proc.stdout[-3000:]}")
         with open(out) as f:
@@ -222,7 +224,7 @@ def _print_phases(load, k, records, steps):
 
 def ranks(args):
     """``pmpm bench ranks``: returns the exit code."""
-    if args.child:
+    if getattr(args, "child", None):
         return _child(args.child[0], args.steps, args.child[1])
     if shutil.which("mpirun") is None:
         print("pmpm: error: bench ranks: mpirun not found (Open MPI's launcher)", file=sys.stderr)
@@ -297,4 +299,6 @@ if __name__ == "__main__":
     import argparse
     parser = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.ranks")
     add_arguments(parser)
+    # the child runs under mpirun (not a user's option, so not in ``pmpm bench ranks --help``)
+    parser.add_argument("--child", nargs=2, metavar=("MODE", "OUT"), help="internal: run one child, write OUT")
     sys.exit(ranks(parser.parse_args()))
