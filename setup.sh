@@ -28,7 +28,7 @@ fi
 py="$venv/bin/python"
 pip="$py -m pip --disable-pip-version-check -q"
 $pip install --upgrade pip >/dev/null
-$pip install "numpy>=1.26,<2.4" "mpi4py>=4.0" "numba>=0.60" meshio matplotlib "pytest>=7" scipy scikit-fem \
+$pip install "numpy>=1.26,<2.4" "mpi4py>=4.0" "numba>=0.60" meshio matplotlib "pytest>=7" hypothesis scipy scikit-fem \
     Cython pkgconfig "setuptools>=77" wheel
 
 if ! "$py" -c 'import h5py, sys; sys.exit(0 if h5py.get_config().mpi else 1)' 2>/dev/null; then

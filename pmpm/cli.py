@@ -117,6 +117,7 @@ def _tool(args):
     if args.command == "bench":
         from pmpm.benchmarks.cli import main as bench_main
         return bench_main(args)
+    from pmpm.errors import ConfigError
     from pmpm.log import setup_logging
     setup_logging(0, quiet=True)  # the tool prints what it wrote itself, one line a file
     files = args.files if args.command == "plot" else [args.file]
@@ -136,6 +137,8 @@ def _tool(args):
         else:
             from pmpm.io import export
             written = export(args.file, args.format, args.outdir)
+    except ConfigError as exc:  # a foreign file where the tool would write (pmpm.io.ownership)
+        return _fail(str(exc), EXIT_BAD_INPUT)
     except OSError as exc:  # an unwritable folder, a read-only results file (xdmf adds /views)
         return _fail(f"{exc.filename or files[0]}: {exc.strerror or exc}", EXIT_BAD_INPUT)
     except (ValueError, KeyError) as exc:  # a results file without what the tool needs (positions)

@@ -244,21 +244,40 @@ class Run:
                     if owner is not None and owner != me:
                         bad = path
                         break
-        bad = self.comm.bcast(bad)
+        foreign = None
+        if self.rank == 0 and bad is None:
+            # every file the run and its post-processing may write over: pmpm's own or refused
+            from pmpm.io.ownership import ForeignFileError, check_owned
+            from pmpm.scene.names import run_files
+            try:
+                for _key, name in run_files(self.scene):
+                    check_owned(os.path.join(self.scene.output.directory, name), self.scene.stem)
+            except ForeignFileError as exc:
+                foreign = (exc.key, exc.reason)
+        bad, foreign = self.comm.bcast((bad, foreign))
         if bad:
             raise ConfigError("output.directory", f"{bad} belongs to a run of another scene file "
                                                   f"or variant; choose another output.directory")
+        if foreign:
+            from pmpm.io.ownership import ForeignFileError
+            raise ForeignFileError(*foreign)
 
     def _remove_stale_checkpoints(self):
         """A fresh run replaces this run's results file, so the checkpoints and last good state
         of an earlier run of the same scene no longer belong to it (a later --restart would
         continue the old run)."""
         from pmpm.io.checkpoint import checkpoint_paths, lastgood_path
+        from pmpm.io.ownership import ForeignFileError, remove_owned
+        foreign = None
         if self.rank == 0:
-            for path in checkpoint_paths(self._base()) + [lastgood_path(self._base())]:
-                if os.path.exists(path):
-                    os.remove(path)
-        self.comm.Barrier()
+            try:  # only pmpm's own files of this scene (checked again: never a user's file)
+                for path in checkpoint_paths(self._base()) + [lastgood_path(self._base())]:
+                    remove_owned(path, self.scene.stem)
+            except ForeignFileError as exc:
+                foreign = (exc.key, exc.reason)
+        foreign = self.comm.bcast(foreign)
+        if foreign:
+            raise ForeignFileError(*foreign)
 
     def _open_output(self):
         from pmpm.io import OutputFile
@@ -268,6 +287,7 @@ class Run:
         attrs = {"scene": json.dumps(self.scene.to_dict(), default=str), "pmpm_version": __version__,
                  "variant": self.scene.variant, "title": self.scene.title,
                  "scene_file": _scene_location(self.scene.path, self.path),
+                 "pmpm_owner": self.scene.stem,  # the record pmpm.io.ownership reads
                  "scene_fingerprint": self.fingerprint, "history_columns": list(HISTORY_COLUMNS)}
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
@@ -365,6 +385,11 @@ class Run:
         missing = [k for k in wanted if k not in fields]
         if missing:
             raise ValueError(f"the checkpoint has no field {missing[0]!r}, which this scene needs")
+        for k, (trailing, dtype) in wanted.items():  # e.g. positions of 3 columns: refused
+            a = fields[k]
+            if a.shape[1:] != tuple(trailing) or a.dtype != dtype:
+                raise ValueError(f"the checkpoint's field {k!r} has rows of shape {a.shape[1:]} and "
+                                 f"dtype {a.dtype}, this scene's {tuple(trailing)} and {dtype}")
 
     def checkpoint(self, snap=None, path=None):
         """Write the current (or a snapshot's) state as the newest checkpoint, or to ``path``
@@ -389,6 +414,7 @@ class Run:
              "internal_work": float(internal), "damping_work": float(damped),
              "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
              "scene_file": _scene_location(self.scene.path, self.path), "variant": self.scene.variant,
+             "pmpm_owner": self.scene.stem,
              "scene_fingerprint": self.fingerprint, "scene_record": self.record,
              "step_setting": self._step_setting()},
             path=path)

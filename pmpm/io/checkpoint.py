@@ -85,6 +85,8 @@ def _complete_step(path):
     if not os.path.exists(path):
         return None
     try:
+        from pmpm.io.validate import check_regular
+        check_regular(path)  # a FIFO would block HDF5's open
         with h5py.File(path, "r") as f:
             if bool(f.attrs.get("complete", False)) and "particles/id" in f:
                 return int(f.attrs["step"])
@@ -230,6 +232,8 @@ def _write_file(path, comm, state, specs, blocks, start):
         for key in ("time", "step", "n_total"):
             f.attrs[key] = state[key]
         f.attrs["attrs"] = json_dumps(state)
+        if isinstance(state.get("pmpm_owner"), str):  # the record pmpm.io.ownership reads
+            f.attrs["pmpm_owner"] = state["pmpm_owner"]
         grp = f.create_group("particles")
         for name, (trailing, dtype) in specs.items():
             dset = grp.create_dataset(name, (state["n_total"],) + trailing, dtype,
@@ -281,6 +285,21 @@ def read_checkpoint(path_base, comm, path=None):
         if not existing:
             raise FileNotFoundError(f"no checkpoint found: neither {paths[0]} nor {paths[1]} exists")
         raise ValueError(f"no complete checkpoint: {', '.join(existing)} cut short or unreadable")
+    # rank 0 checks the whole file before any rank uses it: every dataset's shape and dtype,
+    # the counts, the attributes, no links out of the file (pmpm.io.validate)
+    problem = None
+    if comm.Get_rank() == 0:
+        from pmpm.io.validate import check_checkpoint_schema
+        try:
+            with h5py.File(path, "r") as f:
+                check_checkpoint_schema(f, LAYOUT)
+        except ValueError as exc:
+            problem = str(exc)
+        except (OSError, RuntimeError, KeyError, TypeError) as exc:
+            problem = f"an object cannot be read ({type(exc).__name__})"
+    problem = comm.bcast(problem)
+    if problem:
+        raise ValueError(f"{path}: not a usable pmpm checkpoint: {problem}")
     # Reads are independent (each rank its own block): plain h5py is enough
     with h5py.File(path, "r") as f:
         attrs = json.loads(f.attrs["attrs"])

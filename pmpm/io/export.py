@@ -22,6 +22,7 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 
+from pmpm.io import ownership
 from pmpm.io.xdmf import view_items, write_xdmf
 
 __all__ = ["export", "FORMATS"]
@@ -68,15 +69,15 @@ def _export_vtu(h5_path, outdir):
         frames = f["frames"]
         if "x" not in frames:  # checked before anything is written
             raise ValueError(f"{h5_path} has no /frames/x to use as particle positions")
-        os.makedirs(outdir, exist_ok=True)
         for index, time in enumerate(frames["time"][()]):
             if not np.isfinite(time):
                 continue  # cut short by a crash
             name = f"{stem}_{index:05d}.vtu"
-            _frame_mesh(frames, index).write(os.path.join(outdir, name), file_format="vtu")
-            paths.append(os.path.join(outdir, name))
+            path = ownership.claim(os.path.join(outdir, name))  # before it is written
+            _frame_mesh(frames, index).write(path, file_format="vtu")
+            paths.append(path)
             entries.append((time, name))
-    pvd = os.path.join(outdir, f"{stem}.pvd")
+    pvd = ownership.claim(os.path.join(outdir, f"{stem}.pvd"))
     _write_pvd(pvd, entries)
     return paths + [pvd]
 
@@ -107,17 +108,20 @@ def export(h5_path, fmt="vtu", outdir=None):
     """
     h5_path = os.fspath(h5_path)
     stem, folder = os.path.splitext(h5_path)[0], os.path.dirname(h5_path)
-    if fmt == "vtu":
-        paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
-    elif fmt == "xdmf":
-        target_dir = os.fspath(outdir) if outdir else folder
-        with h5py.File(h5_path, "r") as f:
-            if "frames/x" not in f:  # checked before the folder is made
-                raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
-        os.makedirs(target_dir or ".", exist_ok=True)
-        target = os.path.join(target_dir, os.path.basename(stem) + ".xdmf")
-        paths = [write_xdmf(h5_path, target)]
-    else:
+    if fmt not in FORMATS:
         raise ValueError(f"unknown export format {fmt!r}; valid formats: {', '.join(FORMATS)}")
+    from pmpm.io.plot import scene_stem
+    # every file is claimed before it is written; a failure takes back the call's files and
+    # the folders it made, so a failed export leaves nothing behind (pmpm.io.ownership)
+    with ownership.writing(scene_stem(h5_path)):
+        if fmt == "vtu":
+            paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
+        else:
+            target_dir = os.fspath(outdir) if outdir else folder
+            with h5py.File(h5_path, "r") as f:
+                if "frames/x" not in f:  # checked before the folder is made
+                    raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
+            target = ownership.claim(os.path.join(target_dir or ".", os.path.basename(stem) + ".xdmf"))
+            paths = [write_xdmf(h5_path, target)]
     logger.info("exported %s to %d %s files", h5_path, len(paths), fmt)
     return paths

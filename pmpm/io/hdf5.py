@@ -832,9 +832,12 @@ def check_results_file(path):
         If the file cannot be opened as HDF5, or lacks pmpm's ``layout`` attribute
         or the ``/frames``, ``/history`` and ``/energies`` groups.
     """
+    from pmpm.io.validate import check_regular, check_results_schema
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise ValueError("no such file")
+    try:
+        check_regular(path)  # a FIFO or device would block or stream forever in HDF5's open
+    except OSError:
+        raise ValueError("no such file") from None
     try:
         f = h5py.File(path, "r")
     except OSError:
@@ -849,3 +852,10 @@ def check_results_file(path):
         missing = [g for g in ("frames", "history", "energies") if g not in f]
         if missing:
             raise ValueError(f"not a complete pmpm results file (no /{missing[0]})")
+        try:  # every group, dataset, shape, dtype and attribute the readers use
+            check_results_schema(f)
+        except ValueError as exc:
+            raise ValueError(f"not a usable pmpm results file: {exc}") from None
+        except (OSError, RuntimeError, KeyError, TypeError) as exc:  # HDF5 cannot read a part
+            raise ValueError(f"not a usable pmpm results file: an object cannot be read "
+                             f"({type(exc).__name__})") from None

@@ -28,6 +28,7 @@ import h5py
 import numpy as np
 
 from pmpm.io import schema
+from pmpm.io import ownership
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
 from pmpm.scene.names import energies_png, history_png
 
@@ -136,7 +137,7 @@ def _plot_track(track, runs, outdir, stem):
     axes[0].set_title(f"history of {track}")
     _legend(axes[0])
     axes[-1].set_xlabel(_axis("time", "s"))
-    path = os.path.join(outdir, history_png(stem, _safe(track)))
+    path = ownership.claim(os.path.join(outdir, history_png(stem, _safe(track))))
     fig.savefig(path, dpi=110)
     return path
 
@@ -159,7 +160,7 @@ def _plot_energies(label, energies, outdir, run):
     bottom.set_ylabel(_axis("relative balance error", "1"))
     bottom.set_xlabel(_axis("time", "s"))
     bottom.grid(True, alpha=0.3)
-    path = os.path.join(outdir, energies_png(_safe(run)))
+    path = ownership.claim(os.path.join(outdir, energies_png(_safe(run))))
     fig.savefig(path, dpi=110)
     return path
 
@@ -185,7 +186,6 @@ def plot_results(h5_paths, outdir):
         every file with energy rows.
     """
     outdir = os.fspath(outdir)
-    os.makedirs(outdir, exist_ok=True)
     runs, energy_runs = [], []
     paths = list(map(os.fspath, h5_paths))
     for path in paths:
@@ -196,8 +196,12 @@ def plot_results(h5_paths, outdir):
         energy_runs.append((label, read_energies(path), _file_stem(path)))
     stem = _safe(scene_stem(paths[0]))
     track_names = list(dict.fromkeys(t for _, _, tracks, _ in runs for t in tracks))
-    pngs = [_plot_track(track, runs, outdir, stem) for track in track_names]
-    pngs += [_plot_energies(label, e, outdir, run) for label, e, run in energy_runs if len(e.get("time", ()))]
+    # every file is claimed before it is drawn: a foreign file of the same name stops the call
+    # and takes back what it wrote (pmpm.io.ownership)
+    with ownership.writing(stem):
+        pngs = [_plot_track(track, runs, outdir, stem) for track in track_names]
+        pngs += [_plot_energies(label, e, outdir, run) for label, e, run in energy_runs
+                 if len(e.get("time", ()))]
     logger.info("wrote %d plots to %s", len(pngs), outdir)
     return pngs
 
@@ -269,6 +273,6 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
     ax.set_ylabel(_axis("y", "m"))
     ax.set_title(f"t = {time:.6g} s, displacements x {scale:g}")
     fig.colorbar(points, ax=ax, label=_axis(label, units))
-    os.makedirs(os.path.dirname(os.path.abspath(out_png)), exist_ok=True)
-    fig.savefig(out_png, dpi=130)
+    with ownership.writing(scene_stem(h5_path)):
+        fig.savefig(ownership.claim(os.fspath(out_png)), dpi=130)
     return os.fspath(out_png)

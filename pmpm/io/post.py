@@ -5,6 +5,7 @@ import os
 import h5py
 import numpy as np
 
+from pmpm.io import ownership
 from pmpm.io.hdf5 import read_history
 from pmpm.scene.names import deformed_png, track_csv
 
@@ -21,13 +22,14 @@ def write_history_csv(h5_path, outdir):
     """One CSV per tracked point: ``<stem>[_<variant>]_history_<track>.csv`` with t, ux, uy,
     vx, vy (SI units)."""
     paths = []
-    with h5py.File(h5_path, "r") as f:
+    from pmpm.io.plot import scene_stem
+    with h5py.File(h5_path, "r") as f, ownership.writing(scene_stem(h5_path)):
         if "history" not in f:
             return paths
         t, tracks, cols = read_history(f)
         for name, data in tracks.items():
             keep = [cols.index(c) for c in ("ux", "uy", "vx", "vy")]
-            path = os.path.join(outdir, track_csv(_run(h5_path), name))
+            path = ownership.claim(os.path.join(outdir, track_csv(_run(h5_path), name)))
             np.savetxt(path, np.column_stack([t, data[:, keep]]), delimiter=",",
                        header="t,ux,uy,vx,vy", comments="", fmt="%.9g")
             paths.append(path)
@@ -40,15 +42,17 @@ def postprocess(scenes, h5_paths):
     from pmpm.io import plot_results
     outdir = scenes[0].output.directory
     made = []
-    for path in h5_paths:
-        made += write_history_csv(path, outdir)
-    made += plot_results(h5_paths, outdir)
-    from pmpm.results.post import structural_outputs  # sections and reactions, if asked for
-    for path in h5_paths:
-        made += structural_outputs(path, outdir)
-    for scene, path in zip(scenes, h5_paths):
-        if scene.output.deformed_plot:
-            made.append(_deformed(path, scene.output.deformed_plot, outdir))
+    # one transaction: a foreign file met on the way takes back every file of this call
+    with ownership.writing(scenes[0].stem):
+        for path in h5_paths:
+            made += write_history_csv(path, outdir)
+        made += plot_results(h5_paths, outdir)
+        from pmpm.results.post import structural_outputs  # sections and reactions, if asked for
+        for path in h5_paths:
+            made += structural_outputs(path, outdir)
+        for scene, path in zip(scenes, h5_paths):
+            if scene.output.deformed_plot:
+                made.append(_deformed(path, scene.output.deformed_plot, outdir))
     for p in made:
         logger.info("wrote %s", p)
     return made

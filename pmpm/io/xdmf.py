@@ -296,6 +296,9 @@ def write_document(h5_path, xdmf_path, n_total, specs, frames, cache=None):
             text = cache[frame] = "      " + ET.tostring(grid, encoding="unicode").rstrip() + "\n"
         parts.append(text)
     parts.append(_TAIL)
+    # the marker on the second line tells pmpm this sidecar is its own (pmpm.io.ownership)
+    from pmpm.io.ownership import xdmf_marker
+    parts[0] = _HEAD.replace("\n", "\n" + xdmf_marker(os.path.basename(h5_path)) + "\n", 1)
     tmp = f"{xdmf_path}.tmp"
     with open(tmp, "w", encoding="utf-8") as fh:
         fh.write("".join(parts))

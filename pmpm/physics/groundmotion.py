@@ -26,13 +26,8 @@ MAX_RECORD_BYTES = 64 << 20
 
 def _read_text(path):
     """The file as text; refuses devices, huge and non-UTF-8 files (never quoting them)."""
-    import stat
-    with open(path, "rb") as fh:
-        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-            raise ValueError("not a regular file")
-        raw = fh.read(MAX_RECORD_BYTES + 1)
-    if len(raw) > MAX_RECORD_BYTES:
-        raise ValueError(f"larger than {MAX_RECORD_BYTES >> 20} MB")
+    from pmpm.io.validate import read_regular
+    raw = read_regular(path, MAX_RECORD_BYTES)  # non-blocking: a FIFO is refused, not waited on
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:

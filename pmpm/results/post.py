@@ -11,6 +11,7 @@ import os
 import h5py
 import numpy as np
 
+from pmpm.io import ownership
 from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS
 
 __all__ = ["read_tables", "write_csv", "structural_outputs"]
@@ -34,14 +35,16 @@ def write_csv(h5_path, outdir, tables=None):
     tables = tables or read_tables(h5_path)
     stem = os.path.splitext(os.path.basename(h5_path))[0]
     paths = []
-    for group, kind, columns in (("sections", "section", SECTION_COLUMNS),
-                                 ("reactions", "reaction", REACTION_COLUMNS)):
-        for name, table in tables[group].items():
-            path = os.path.join(outdir, f"{stem}_{kind}_{name}.csv")
-            header = ",".join(("t",) + columns[1:])
-            np.savetxt(path, np.column_stack([table[c] for c in columns]), delimiter=",",
-                       header=header, comments="", fmt="%.9g")
-            paths.append(path)
+    from pmpm.io.plot import scene_stem
+    with ownership.writing(scene_stem(h5_path)):  # claimed before written (pmpm.io.ownership)
+        for group, kind, columns in (("sections", "section", SECTION_COLUMNS),
+                                     ("reactions", "reaction", REACTION_COLUMNS)):
+            for name, table in tables[group].items():
+                path = ownership.claim(os.path.join(outdir, f"{stem}_{kind}_{name}.csv"))
+                header = ",".join(("t",) + columns[1:])
+                np.savetxt(path, np.column_stack([table[c] for c in columns]), delimiter=",",
+                           header=header, comments="", fmt="%.9g")
+                paths.append(path)
     return paths
 
 
@@ -57,18 +60,22 @@ def structural_outputs(h5_path, outdir):
     tables = read_tables(h5_path)
     if not tables["sections"] and not tables["reactions"]:
         return []
-    os.makedirs(outdir, exist_ok=True)
+    from pmpm.io.plot import scene_stem
     stem = os.path.splitext(os.path.basename(h5_path))[0]
-    made = write_csv(h5_path, outdir, tables)
-    if tables["sections"]:
-        made.append(plots.plot_sections(tables["sections"], os.path.join(outdir, f"{stem}_sections.png"), stem))
-        if any("Mp" in s["attrs"] for s in tables["sections"].values()):
-            made.append(plots.plot_utilisation(tables["sections"], os.path.join(outdir, f"{stem}_utilisation.png"), stem))
-            made.append(plots.plot_hinge_map(h5_path, tables["sections"], os.path.join(outdir, f"{stem}_hinges.png"), stem))
-    if tables["reactions"]:
-        made.append(plots.plot_reactions(tables["reactions"], os.path.join(outdir, f"{stem}_reactions.png"), stem))
-    spec = _hysteresis_spec(h5_path)
-    if spec and tables["reactions"]:
-        made.append(plots.plot_hysteresis(h5_path, tables["reactions"], spec,
-                                          os.path.join(outdir, f"{stem}_hysteresis.png"), stem))
+
+    def png(kind):  # claimed before it is drawn (pmpm.io.ownership)
+        return ownership.claim(os.path.join(outdir, f"{stem}_{kind}.png"))
+
+    with ownership.writing(scene_stem(h5_path)):
+        made = write_csv(h5_path, outdir, tables)
+        if tables["sections"]:
+            made.append(plots.plot_sections(tables["sections"], png("sections"), stem))
+            if any("Mp" in s["attrs"] for s in tables["sections"].values()):
+                made.append(plots.plot_utilisation(tables["sections"], png("utilisation"), stem))
+                made.append(plots.plot_hinge_map(h5_path, tables["sections"], png("hinges"), stem))
+        if tables["reactions"]:
+            made.append(plots.plot_reactions(tables["reactions"], png("reactions"), stem))
+        spec = _hysteresis_spec(h5_path)
+        if spec and tables["reactions"]:
+            made.append(plots.plot_hysteresis(h5_path, tables["reactions"], spec, png("hysteresis"), stem))
     return made

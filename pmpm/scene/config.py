@@ -759,17 +759,14 @@ MAX_SCENE_BYTES = 1 << 20
 def read_toml(path):
     """Read a TOML file; unreadable, oversized, non-UTF-8 or malformed files are a ConfigError
     naming the file (the reason never quotes the file's contents)."""
-    import stat
-    try:
-        with open(path, "rb") as fh:
-            mode = os.fstat(fh.fileno()).st_mode
-            if not stat.S_ISREG(mode):
-                raise ConfigError(path, "is not a regular file")
-            raw = fh.read(MAX_SCENE_BYTES + 1)
+    from pmpm.io.validate import read_regular
+    try:  # non-blocking open: a FIFO given as the scene is refused, never waited on
+        raw = read_regular(path, MAX_SCENE_BYTES)
     except OSError as exc:
         raise ConfigError(path, f"cannot read ({exc.strerror or type(exc).__name__})") from None
-    if len(raw) > MAX_SCENE_BYTES:
-        raise ConfigError(path, f"larger than {MAX_SCENE_BYTES // 1024} KB: not a scene file")
+    except ValueError as exc:
+        reason = str(exc)
+        raise ConfigError(path, f"{reason}: not a scene file" if reason.startswith("larger") else reason) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

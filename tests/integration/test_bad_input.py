@@ -533,3 +533,74 @@ def test_api_dict_scene_writes_only_with_a_file_name(tmp_path, monkeypatch):
     with pytest.raises(ConfigError, match="no file name"):
         pmpm.run(data, write=True)
     assert os.listdir(tmp_path) == []
+
+
+# -- ownership: pmpm writes over and deletes only its own files (issue 19, docs/output.md) ----
+TRACKED = CKPT_SCENE + '\n[[output.track]]\nname = "tip"\npoint = [2.0, 0.5]\n'
+
+
+@pytest.fixture(scope="module")
+def tracked_run(tmp_path_factory):
+    """A finished run with checkpoints, a tracked point, its CSV and plots and a VTU export."""
+    work = tmp_path_factory.mktemp("owned")
+    (work / "case.toml").write_text(TRACKED)
+    proc = run_cli(work, "case.toml", "-q", timeout=600)
+    assert proc.returncode == 0, proc.stderr.decode()
+    proc = run_cli(work, "export", "case_results/case.h5")
+    assert proc.returncode == 0, proc.stderr.decode()
+    return work
+
+
+#: file in case_results (replaced by a user's own), content, the command that meets it
+FOREIGN = {
+    "results-text": ("case.h5", b"my notes\n", ["case.toml", "--no-plots"]),
+    "results-hdf5": ("case.h5", "hdf5", ["case.toml", "--no-plots"]),
+    "stale-checkpoint": ("case.ckpt0.h5", "hdf5", ["case.toml", "--no-plots"]),
+    "lastgood": ("case.lastgood.h5", b"x", ["case.toml", "--no-plots"]),
+    "sidecar": ("case.xdmf", b"<Xdmf/>\n", ["case.toml", "--no-plots"]),
+    "track-csv": ("case_history_tip.csv", b"t,ux\n0,0\n", ["case.toml"]),
+    "history-png": ("case_history_tip.png", b"\x89PNG mine", ["case.toml"]),
+    "edited-csv": ("case_history_tip.csv", "append", ["case.toml"]),
+    "manifest": ("pmpm-files.json", b"{\"mine\": 1}\n", ["case.toml"]),
+    "plot-png": ("case_energies.png", b"mine", ["plot", "case_results/case.h5"]),
+    "export-vtu": ("case_vtu/case_00001.vtu", b"mine", ["export", "case_results/case.h5"]),
+    "export-xdmf": ("case.xdmf", b"<Xdmf/>\n", ["export", "case_results/case.h5", "--format", "xdmf"]),
+}
+
+
+@pytest.mark.parametrize("name", list(FOREIGN))
+def test_foreign_files_are_never_overwritten_or_deleted(tmp_path, tracked_run, name):
+    target, content, args = FOREIGN[name]
+    work = _copy_run(tracked_run, tmp_path / "w")
+    path = work / "case_results" / target
+    if content == "hdf5":  # a user's own HDF5 file: no pmpm record
+        path.unlink()
+        with h5py.File(path, "w") as f:
+            f["mine"] = np.arange(3)
+    elif content == "append":  # pmpm's file, edited by the user afterwards
+        with open(path, "ab") as fh:
+            fh.write(b"1,2\n")
+    else:
+        path.write_bytes(content)
+    before = _tree(tmp_path)
+    line = assert_promise(run_cli(work, *args), 2, f"case_results/{target}: exists and ")
+    assert "overwrites or deletes only the files it wrote" in line
+    assert _tree(tmp_path) == before, "a file was written or deleted"
+
+
+def test_own_files_are_rewritten_and_two_scenes_share_a_folder(tmp_path, tracked_run):
+    """The same scene runs again over its own files; a second scene in the same folder writes
+    its own names beside them and changes none of the first scene's."""
+    work = _copy_run(tracked_run, tmp_path / "w")
+    first = {k: v for k, v in _tree(work / "case_results").items() if not k.startswith("pmpm-files")}
+    (work / "other.toml").write_text(TRACKED.replace("[output]", '[output]\ndirectory = "case_results"'))
+    proc = run_cli(work, "other.toml", "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    after = _tree(work / "case_results")
+    assert {k: after[k] for k in first} == first, "the second scene changed the first one's files"
+    assert {"other.h5", "other_history_tip.csv", "other_history_tip.png"} <= set(after)
+    proc = run_cli(work, "case.toml", "-q")  # its own files, recorded: no refusal
+    assert proc.returncode == 0, proc.stderr.decode()
+    with open(work / "case_results" / "pmpm-files.json") as fh:
+        owners = {n: e["owner"] for n, e in json.load(fh)["files"].items()}
+    assert owners["case_history_tip.csv"] == "case" and owners["other_history_tip.csv"] == "other"
