@@ -26,7 +26,8 @@ from mpi4py import MPI
 
 from decomposition import alltoallv_fields, get_comm, wait_all
 from pmpm.core import kernels as K
-from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, face_node_sets
+from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
+from pmpm.physics.supports import HeldFaces
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow, choose_tile
 from pmpm.physics.groundmotion import GroundMotion
@@ -42,6 +43,7 @@ from pmpm.results.sections import make_cuts
 from pmpm.scene.limits import check_memory, check_time_step
 
 __all__ = ["Solver", "needs_deformation_gradient"]
+MOM_FIELD = K.MOM
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -110,12 +112,17 @@ class Solver:
                        if scene.loads.ground_motion else None)
         self.damping = scene.loads.damping or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
-        self._node_sets = face_node_sets(scene.boundaries, scene.bodies, self.grid, points,
-                                         lambda idx: self._points_shape(points, idx))
+        # supports attached to a body hold its face's particles (None: the scene has none)
+        self.supports = (HeldFaces(scene.boundaries, scene.bodies, points, self.grid)
+                         if any(b.body is not None for b in scene.boundaries) else None)
+        if self.supports is not None and scene.contact is not None:
+            k = self.supports.index[0]
+            raise ConfigError(f"boundary[{k}]", "a boundary attached to a body does not work with [contact] "
+                                                "(give it a box)")
         self.n_total = len(points["m"])
         # structural results the scene asks for (nothing is set up or computed otherwise)
         self.sections = make_cuts(scene, self.grid, points) if scene.output.sections else []
-        self.reactions = (Reactions(scene.boundaries, self.grid, self._node_sets)
+        self.reactions = (Reactions(scene.boundaries, self.grid, self.supports.centroids if self.supports else None)
                           if any(b.reaction for b in scene.boundaries) else None)
         self.axis = choose_axis(scene.parallel.axis, self.grid)
         self.decomp = make_decomposition(self.comm, self.grid, self.axis,
@@ -130,6 +137,8 @@ class Solver:
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
         if self.keeps_F:
             start_deformation(self.particles)
+        if self.supports is not None:
+            self.supports.mark(self.particles)
         if self.interpolation != "point":
             self._add_domains()
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
@@ -172,7 +181,6 @@ class Solver:
                                               self.particles.n))
         else:
             self.window.use_tiles(0)
-        self.window.node_sets = self._node_sets   # body-attached boundaries' global node masks
         apply_boundary_masks(self.window, self.scene.boundaries)
         if self.reactions is not None:
             self.reactions.bind(self.window, self.scene.boundaries)
@@ -201,13 +209,6 @@ class Solver:
     def _add_domains(self):
         p = self.particles
         p["domain"] = self._initial_domains(p["vol"], p["body"])
-
-    def _points_shape(self, points, idx):
-        """The kernels' ``shape`` for the scene points ``idx`` at the start (set-up only)."""
-        domain = (self._initial_domains(points["vol"][idx], points["body"][idx])
-                  if self.interpolation != "point" else None)
-        F = np.tile([1.0, 0.0, 0.0, 1.0, 1.0], (len(domain), 1)) if self.interpolation == "cpdi" else None
-        return shape_argument(self.scene.solver.shape_function, self.interpolation, domain, F)
 
     @property
     def shape(self):
@@ -280,12 +281,16 @@ class Solver:
                                           react, w.tiles)
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
+        if self.supports is not None:
+            self.supports.project(self, MOM_FIELD, impulse=True)
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         w = self.window
         K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
                                0, w.shape[0], 0, w.shape[1], w.tiles)
+        if self.supports is not None:
+            self.supports.project(self, target)
 
     def grid_to_particles(self, remap):
         """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
@@ -294,6 +299,8 @@ class Solver:
         vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
                                    *self._geometry(), remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
+        if self.supports is not None:
+            self.supports.hold_particles(self)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does

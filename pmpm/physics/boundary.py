@@ -5,17 +5,9 @@ Types: ``fixed`` (both components zero), ``roller_x`` (free to slide along x, y 
 
 A box selects the nodes whose coordinates lie in it (inclusive, with a tolerance of 1e-6 h).
 
-A boundary attached to a body (``body = "beam"``, ``face = "left"``, no box) selects, at any
-resolution, the nodes that hold that face: the face's particles are the body's outermost layer
-on that side (within half a particle spacing of its extreme particle), and the nodes are those
-whose shape function (B-spline or GIMP, as the scene interpolates) is nonzero at one of them and
-that lie on the face's side of that layer, outside the material. On a grid edge this is the edge
-node line over the face plus the edge nodes the face's corner particles reach beyond it (the
-basis is interpolatory at a grid edge, so the grid velocity on the face is exactly the
-prescribed one); no node inside the body is constrained, so the clamp does not stiffen the body
-over a resolution-dependent length. Inside the grid the same rule fixes the nodes just outside
-the face, which holds the face only partly (the face's particles also interpolate from free
-nodes inside the body): clamp a face on a grid edge.
+A boundary attached to a body (``body = "beam"``, ``face = "left"``, no box) constrains no node:
+it holds the face's particles by a constraint on the grid velocity (pmpm.physics.supports),
+which holds anywhere in the grid.
 
 Each rank marks the nodes of its own window; ghost nodes get the owner's marks, so the
 BCs apply wherever a rank touches the boundary and nowhere else.
@@ -26,8 +18,7 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "COMPONENTS", "face_node_sets",
-           "FACES"]
+__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "COMPONENTS", "FACES"]
 logger = logging.getLogger(__name__)
 
 #: velocity components each boundary type prescribes
@@ -42,53 +33,9 @@ def _select(X, Y, bc, tol):
             & (Y >= bc.lower[1] - tol) & (Y <= bc.upper[1] + tol))
 
 
-def face_node_sets(boundaries, bodies, grid, points, shape_of):
-    """Global node masks (grid.nodes) of the body-attached boundaries, keyed by the boundary
-    (its frozen config) as ``select_nodes`` looks them up in ``window.node_sets``.
-
-    Parameters
-    ----------
-    boundaries, bodies : the scene's BoundaryConfig and BodyConfig tuples
-    grid : pmpm.core.grid.Grid
-    points : dict of the scene's global points (``x``, ``vol``, ``body``)
-    shape_of : callable(index array) -> the transfer kernels' ``shape`` for those points
-    """
-    from pmpm.core.kernels.support import mark_support
-    names = [b.name for b in bodies]
-    sets = {}
-    for k, bc in enumerate(boundaries):
-        if bc.body is None:
-            continue
-        body = names.index(bc.body)
-        axis, side = FACES[bc.face]
-        idx = np.nonzero(points["body"] == body)[0]
-        thickness = bodies[body].thickness
-        spacing = np.sqrt(points["vol"][idx] / thickness)
-        coord = points["x"][idx, axis]
-        extreme = coord.min() if side < 0 else coord.max()
-        layer = idx[np.abs(coord - extreme) <= 0.5 * spacing]
-        mask = np.zeros(grid.nodes, dtype=np.int8)
-        x = np.ascontiguousarray(points["x"][layer])
-        mark_support(x, mask, grid.origin, grid.inv_h, grid.cells[0], grid.cells[1], shape_of(layer))
-        # only the nodes on the face's side of the layer: outside the material
-        node = grid.origin[axis] + grid.h * np.arange(grid.nodes[axis])
-        outside = node <= extreme + 1e-6 * grid.h if side < 0 else node >= extreme - 1e-6 * grid.h
-        keep = np.zeros(grid.nodes, dtype=bool)
-        if axis == 0:
-            keep[outside, :] = True
-        else:
-            keep[:, outside] = True
-        sets[bc] = (mask > 0) & keep
-        if not sets[bc].any():
-            raise ConfigError(f"boundary[{k}]", f"face {bc.face!r} of body {bc.body!r} reaches no grid node")
-        logger.info("boundary %r: %d node(s) hold face %r of body %r", bc.name, int(sets[bc].sum()),
-                    bc.face, bc.body)
-    return sets
-
-
 def check_boundaries(boundaries, grid):
-    """Refuse a boundary box that selects no node of the global grid (body-attached boundaries
-    are checked when their nodes are found, ``face_node_sets``)."""
+    """Refuse a boundary box that selects no node of the global grid (boundaries attached to a
+    body are checked when their particles are found, pmpm.physics.supports)."""
     i = np.arange(grid.nodes[0])
     j = np.arange(grid.nodes[1])
     X, Y = grid.node_coords(i[:, None], j[None, :])
@@ -99,11 +46,10 @@ def check_boundaries(boundaries, grid):
 
 
 def select_nodes(window, bc):
-    """Boolean (window.shape) mask of the window's nodes of boundary ``bc`` (a body-attached
-    boundary's global mask is in ``window.node_sets``, from ``face_node_sets``)."""
+    """Boolean (window.shape) mask of the window's nodes of boundary ``bc`` (none for a
+    boundary attached to a body: it holds particles, pmpm.physics.supports)."""
     if bc.body is not None:
-        lo, shape = window.lo, window.shape
-        return window.node_sets[bc][lo[0]:lo[0] + shape[0], lo[1]:lo[1] + shape[1]]
+        return np.zeros(window.shape, dtype=bool)
     X, Y = window.node_coords()
     return _select(X, Y, bc, 1e-6 * window.grid.h)
 

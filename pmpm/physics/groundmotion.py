@@ -124,12 +124,16 @@ class GroundMotion:
         dt = np.diff(self.t)
         self.v = np.concatenate([[0.0], np.cumsum(0.5 * (self.a[1:] + self.a[:-1]) * dt)])
         self.direction = 0 if config["direction"] == "x" else 1
-        names = config["boundaries"] or [b.name for b in boundaries if b.type == "fixed"]
+        # the box supports (a boundary attached to a body holds particles, not nodes)
+        names = config["boundaries"] or [b.name for b in boundaries if b.type == "fixed" and b.body is None]
         chosen = []
         for name in names:
             match = [b for b in boundaries if b.name == name]
             if not match:
                 raise ConfigError("loads.ground_motion.boundaries", f"no [[boundary]] named {name!r}")
+            if match[0].body is not None:
+                raise ConfigError("loads.ground_motion.boundaries",
+                                  f"boundary {name!r} is attached to a body: ground motion moves box supports")
             if match[0].type != "fixed":
                 raise ConfigError("loads.ground_motion.boundaries", f"boundary {name!r} is not 'fixed'")
             chosen.append(match[0])

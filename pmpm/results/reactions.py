@@ -10,6 +10,10 @@ point (anticlockwise positive): the mean over the sampling interval, which makes
 ``sum of loads + reactions = (change of total momentum) / interval`` hold exactly for the
 particle momenta (FLIP transfers every nodal velocity change to the particles).
 
+A boundary attached to a body holds particles instead of nodes (pmpm.physics.supports): its
+impulses are those of its velocity constraint on the nodes, plus the momentum its held
+particles' velocities lose when they are set to the prescribed one; they go into the same sums.
+
 Nothing of this exists unless a boundary asks for its reaction: the kernel receives ``None``
 and compiles without the bookkeeping. Each rank sums its owned nodes; the sums are added over
 ranks once per sample (by pmpm.results.recorder, together with the section cuts).
@@ -26,12 +30,12 @@ __all__ = ["Reactions", "node_centroid"]
 logger = logging.getLogger(__name__)
 
 
-def node_centroid(bc, grid, node_sets=None):
+def node_centroid(bc, grid, centroids=None):
     """Centroid of the global grid nodes inside the boundary's box (the default moment point);
-    for a boundary attached to a body, of its nodes in ``node_sets`` (pmpm.physics.boundary)."""
+    for a boundary attached to a body, of the particles it holds (``centroids[bc]``,
+    pmpm.physics.supports)."""
     if bc.body is not None:
-        i, j = np.nonzero(node_sets[bc])
-        return np.array([grid.origin[0] + grid.h * i.mean(), grid.origin[1] + grid.h * j.mean()])
+        return np.asarray(centroids[bc], dtype=np.float64)
     tol = 1e-6 * grid.h
     i = np.arange(grid.nodes[0])
     j = np.arange(grid.nodes[1])
@@ -50,16 +54,16 @@ class Reactions:
     boundaries : sequence of BoundaryConfig
         All of the scene's boundaries (those with ``reaction`` are recorded).
     grid : Grid
-    node_sets : dict, optional
-        The body-attached boundaries' global node masks (``face_node_sets``).
+    centroids : dict, optional
+        The body-attached boundaries' held particles' centroids (``HeldFaces.centroids``).
     """
 
-    def __init__(self, boundaries, grid, node_sets=None):
+    def __init__(self, boundaries, grid, centroids=None):
         self.grid = grid
         self.index = [k for k, b in enumerate(boundaries) if b.reaction]
         self.boundaries = [boundaries[k] for k in self.index]
         self.names = [b.name for b in self.boundaries]
-        self.points = np.array([b.moment_about if b.moment_about is not None else node_centroid(b, grid, node_sets)
+        self.points = np.array([b.moment_about if b.moment_about is not None else node_centroid(b, grid, centroids)
                                 for b in self.boundaries], dtype=np.float64).reshape(-1, 2)
         self.sums = np.zeros((len(self.boundaries), 3))  # impulses Jx, Jy, moment about (0, 0)
         self.since = None   # time of the last sample

@@ -1,31 +1,47 @@
-"""The large-rotation cantilever converges (issue 12, item 5): cases/hard/cantilever_large_rotation.toml
-run as its variants ``<material>_h<cell size>``.
+"""The large-rotation cantilever as published (issue 20): cases/hard/cantilever_large_rotation.toml,
+the benchmark of Sadeghirad, Brannon & Burghardt 2011 (plane strain, neo-Hookean, the clamp
+alone, the grid extended on every side), against its finite-element curve
+(cases/hard/data/cantilever_fe_corner.csv, the lower free corner's uy).
 
-Every variant must run to its end time (2.8 s >= the 2.5 s the issue asks for: the first swing
-down and back) with no particle leaving the grid and no separation, and keep its energy balance
-within 2%. The two coarser cell sizes of both materials run here (CPDI at CFL 0.25: about 26 s
-in all, measured at load 5); the finest (0.0625 m, about 2 min per material) runs when
-PMPM_CANTILEVER_FINE=1 or by the study command
-``python -m pmpm.benchmarks.studies.cantilever_convergence``, which also prints the table of
-docs/hard_cases.md. With it the test checks the issue's convergence criterion: the successive
-differences of the largest tip drop shrink and the two finest are within 2%.
+CI runs the two coarser neo-Hookean cell sizes (0.25 and 0.125 m; about 80 s together on this
+machine when it is lightly loaded); the finest (0.0625 m, several minutes) runs when
+PMPM_CANTILEVER_FINE=1 or by ``python -m pmpm.benchmarks.studies.cantilever_convergence``, which
+prints the table of docs/hard_cases.md.
+
+Where the limits come from:
+
+* RMS gap to the FE curve, 0.10 m. The curve is digitised to two decimals from a figure whose
+  vertical axis spans about 3.5 m: reading error about 0.02 to 0.03 m (a 1% of the axis pixel
+  error). The FE solution is itself a discretisation (the paper's mesh; not converged to
+  better than about 1% of the 3.28 m drop, 0.03 m). A beam that holds, swings down to within
+  3% of the published largest drop and comes back in phase is inside 0.1 m; a beam torn off its
+  clamp (the issue's failure: the root moved 0.77 m by 1.0 s, the beam fell) is off by metres,
+  and a beam 10% too stiff or too flexible (a drop 0.33 m off, a period 5% off) is off by more
+  than 0.15 m over the swing back.
+* Energy, 2% lost and 2% gained: the scene conserves energy (no wall, no contact, no damping,
+  an elastic material; the clamp does no work), so both signs are discretisation error; 2% is
+  the hard cases' tolerance (tests/hard/hard_cases.py), checked both ways here.
+* Whole: no particle leaves the grid and lattice neighbours stay within a cell of each other.
+* The corner's largest drop within 5% of the FE curve's 3.28 m (the reading error above plus
+  the first-order error of a beam four cells deep at 0.25 m).
 """
 import functools
 import os
 
 import pytest
 
-from pmpm.benchmarks.studies.cantilever_convergence import CELL_SIZES, MATERIALS, run_variant
+from pmpm.benchmarks.studies.cantilever_convergence import CELL_SIZES, FEM_LARGEST_DROP, run_variant
 
-#: the issue's tolerance on the energy balance (relative to the largest energy in play)
+#: a gain or a loss of energy, relative to the largest energy in play (see above)
 ENERGY_TOLERANCE = 0.02
-#: "no separation": particles that started as lattice neighbours (a quarter cell apart) stay
-#: within one cell of each other; a larger gap is an empty cell inside the material, a crack.
-#: (Measured with CPDI: 0.46 to 0.59 in whole runs, the largest at the clamp's top corner;
-#: with the B-spline GIMP the finest beams tore off the clamp with gaps of 1.6 and 2.5.)
+#: RMS of (pmpm - FE) over the curve's samples to 2.8 s (see above)
+RMS_LIMIT = 0.10
+#: the corner's largest drop against the FE curve's (see above)
+DROP_TOLERANCE = 0.05
+#: "no separation": lattice neighbours (a quarter cell apart) stay within one cell
 SEPARATION_CELLS = 1.0
 FINE = os.environ.get("PMPM_CANTILEVER_FINE") == "1"
-COARSE = [f"{m}_h{h}" for m in MATERIALS for h in CELL_SIZES[:2]]
+COARSE = [f"neo_hookean_h{h}" for h in CELL_SIZES[:2]]
 
 
 @functools.lru_cache(maxsize=None)
@@ -34,27 +50,27 @@ def result(variant):
 
 
 @pytest.mark.parametrize("variant", COARSE)
-def test_runs_whole_to_its_end_within_the_energy_tolerance(variant):
+def test_follows_the_fe_curve_whole_with_energy_conserved(variant):
     r = result(variant)
     assert r["error"] is None, f"{variant}: {r['error']}"
-    assert r["t_end"] >= 2.5 and abs(r["t_end"] - 2.8) < 1e-9
+    assert abs(r["t_end"] - 2.8) < 1e-9
     assert r["separation"] < SEPARATION_CELLS, f"{variant}: neighbours {r['separation']:.2f} cells apart"
-    assert r["excess"] < ENERGY_TOLERANCE and r["excess_exact"] < ENERGY_TOLERANCE, r
-    # the swing really is large and comes back: the tip drops past 3 m (the published reference
-    # drops 3.28 m) and rises back above -2 m, more than half way up, before the end
-    assert r["largest_drop"] > 3.0 and r["rebound"] > -2.0, r
+    for key in ("excess", "excess_exact", "loss", "loss_exact"):
+        assert r[key] < ENERGY_TOLERANCE, f"{variant}: {key} {100 * r[key]:.2f}%"
+    assert r["rms_gap_fe"] < RMS_LIMIT, f"{variant}: RMS gap to the FE curve {r['rms_gap_fe']:.3f} m"
+    assert abs(r["corner_largest_drop"] - FEM_LARGEST_DROP) < DROP_TOLERANCE * FEM_LARGEST_DROP, r
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not FINE, reason="the 0.0625 m variants take about 2 min each: set "
+@pytest.mark.skipif(not FINE, reason="the 0.0625 m variant takes several minutes: set "
                                      "PMPM_CANTILEVER_FINE=1 or run the study command")
-@pytest.mark.parametrize("material", MATERIALS)
-def test_largest_tip_drop_converges(material):
-    runs = [result(f"{material}_h{h}") for h in CELL_SIZES]
+def test_the_gap_to_the_fe_curve_shrinks_with_refinement():
+    """Issue 20, item 3 (the other helper's; checked here when asked for): the RMS gap shrinks
+    with each refinement and is at most 0.05 m at the finest; the finest corner drop within 1%
+    of 3.28 m."""
+    runs = [result(f"neo_hookean_h{h}") for h in CELL_SIZES]
     for r in runs:
         assert r["error"] is None and r["separation"] < SEPARATION_CELLS, r
-        assert r["excess"] < ENERGY_TOLERANCE and r["excess_exact"] < ENERGY_TOLERANCE, r
-    d = [r["largest_drop"] for r in runs]
-    diffs = [abs(a - b) / b for a, b in zip(d, d[1:])]
-    assert diffs[1] < diffs[0], f"{material}: drops {d}, differences {diffs} do not shrink"
-    assert diffs[1] < 0.02, f"{material}: the two finest differ by {100 * diffs[1]:.2f}% (issue: 2%)"
+    gaps = [r["rms_gap_fe"] for r in runs]
+    assert gaps[0] > gaps[1] > gaps[2] and gaps[2] <= 0.05, gaps
+    assert abs(runs[2]["corner_largest_drop"] - FEM_LARGEST_DROP) < 0.01 * FEM_LARGEST_DROP, runs[2]

@@ -120,6 +120,12 @@ CASES = {
     "expr-too-long": (velocity("x+" * 300 + "x"), {}, ["--check"], 2, "longer than 500"),
     "expr-keyword": (velocity("sin(x=1)"), {}, ["--check"], 2, "no keyword"),
     "velocity-not-list": (sub("velocity = [0.1, 0.0]", "velocity = 0.1"), {}, ["--check"], 2, "bodies[0].velocity"),
+    # supports (issue 20): a box that selects no grid node, and a face held twice
+    "support-box-outside": (add('[[boundary]]\nname = "floor"\ntype = "fixed"\nlower = [0.0, -1.0]\nupper = [4.0, -0.5]'),
+                            {}, [], 2, "boundary[0]: box selects no grid node"),
+    "support-face-twice": (add('[[boundary]]\ntype = "fixed"\nbody = "block"\nface = "left"\n'
+                               '[[boundary]]\ntype = "roller_y"\nbody = "block"\nface = "left"'),
+                           {}, [], 2, "boundary[1]: holds particles another attached boundary holds"),
     # 2. names that become file names
     "variant-traversal": (add('[variants."/../../../escaped"]\n"solver.cfl" = 0.4'), {}, [], 2,
                           "case.toml: variants: variant name '/../../../escaped'"),

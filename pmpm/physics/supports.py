@@ -1,0 +1,246 @@
+"""Supports attached to a body's face, held by a constraint on the grid velocity.
+
+A ``[[boundary]]`` with ``body`` and ``face`` (no box) holds the face's particles: the body's
+outermost layer of particles on that side (within half a particle spacing of its extreme
+particle, at the start). A particle moves with the interpolated grid velocity
+v_p = sum_i N_ip v_i, so the support is the linear constraint on the nodal velocities
+
+    N v = v_bc      (one row per held particle and constrained component)
+
+imposed after each grid update (and on the MUSL re-mapped velocity) by the smallest change of
+kinetic energy, the projection in the nodal mass norm:
+
+    A = N M^-1 N^T,   A lambda = N v - v_bc,   v <- v - M^-1 N^T lambda
+
+(M the lumped nodal masses; a node a box boundary fixes is not changed: its column is dropped,
+as if its mass were infinite). Where the rows are dependent (more held particles along the face
+than node rows under it, as with 4 particles per cell and cubic B-splines) A is singular but
+the system is consistent (v = v_bc satisfies it); lambda is its minimum-norm solution, through
+the eigenvalues of A above ``RANK_TOLERANCE`` of the largest, which imposes every independent
+row exactly. Nothing depends on where the face lies relative to the grid: on a grid edge, inside
+the grid, on or off the node lines the held particles get exactly the prescribed velocity, and
+since positions move with the same velocity, a fixed face stays where it is.
+
+The constraint's impulse on node i is J_i = -m_i (M^-1 N^T lambda)_i = -(N^T lambda)_i: the
+support's reaction (summed over the owned nodes into pmpm.results.reactions, as the nodal BCs'
+impulses are), and its work J . v_new (zero for a fixed support: N v_new = 0) enters the energy
+balance. The held particles' own velocities are set to the prescribed one after the grid-to-
+particle transfer (their FLIP update would otherwise carry the free nodes' old velocities), and
+the momentum this removes is part of the reaction.
+
+MPI: a rank owns the held particles in its slab, and their stencils lie in its window (the ghost
+width guarantees it; CPDI reports a corner that leaves it). The constraint couples particles
+and nodes across ranks, so each projection gathers every rank's rows (node numbers, weights)
+with the nodes' mass and velocity from the owner's window (complete there after the halo sum)
+in one allgather; every rank then solves the same system in the same order (rows sorted by
+particle id, columns by global node number) and corrects the nodes of its own window, owned
+and ghost alike, so the ghost copies stay equal to their owners'. The reaction and the work are
+summed over owned nodes only, as for the nodal BCs. One rank: no gather.
+"""
+import logging
+
+import numpy as np
+
+from pmpm.core.kernels.support import row_width, support_rows
+from pmpm.errors import ConfigError
+from pmpm.physics.boundary import COMPONENTS, FACES
+
+__all__ = ["HeldFaces", "face_layer", "RANK_TOLERANCE"]
+logger = logging.getLogger(__name__)
+
+#: eigenvalues of A = N M^-1 N^T below this fraction of the largest belong to dependent rows
+#: (they vanish in exact arithmetic); round-off puts them near 1e-16 of the largest
+RANK_TOLERANCE = 1e-10
+
+
+def face_layer(bc, bodies, points):
+    """Indices into ``points`` of the face layer of ``bc``'s body: its particles within half a
+    particle spacing of the body's extreme particle on the face's side (empty if the body has
+    none)."""
+    names = [b.name for b in bodies]
+    body = names.index(bc.body)
+    axis, side = FACES[bc.face]
+    idx = np.nonzero(points["body"] == body)[0]
+    if not len(idx):
+        return idx
+    spacing = np.sqrt(points["vol"][idx] / bodies[body].thickness)
+    coord = points["x"][idx, axis]
+    extreme = coord.min() if side < 0 else coord.max()
+    return idx[np.abs(coord - extreme) <= 0.5 * spacing]
+
+
+class HeldFaces:
+    """The supports attached to bodies' faces of a scene, as velocity constraints.
+
+    Parameters
+    ----------
+    boundaries, bodies : the scene's BoundaryConfig and BodyConfig tuples
+    points : dict of the scene's global points (``x``, ``vol``, ``body``; a point's index is its id)
+    grid : pmpm.core.grid.Grid
+    """
+
+    def __init__(self, boundaries, bodies, points, grid):
+        self.grid = grid
+        self.index = [k for k, bc in enumerate(boundaries) if bc.body is not None]
+        self.boundaries = [boundaries[k] for k in self.index]
+        n = len(self.boundaries)
+        # hold[b, d]: support b prescribes component d, to velocity vel[b, d]
+        self.hold = np.zeros((n, 2), dtype=bool)
+        self.vel = np.zeros((n, 2))
+        ids, which, centroids = [], [], []
+        for b, (k, bc) in enumerate(zip(self.index, self.boundaries)):
+            for d in COMPONENTS[bc.type]:
+                self.hold[b, d] = True
+                self.vel[b, d] = bc.velocity[d]
+            layer = face_layer(bc, bodies, points)
+            if not len(layer):
+                raise ConfigError(f"boundary[{k}]", f"face {bc.face!r} of body {bc.body!r} holds no "
+                                                    f"particle (the body has none in the grid)")
+            ids.append(layer.astype(np.int64))   # a particle's id is its point's index
+            which.append(np.full(len(layer), b, dtype=np.int32))
+            centroids.append(points["x"][layer].mean(axis=0))
+            logger.info("boundary %r: holds %d particle(s) of face %r of body %r", bc.name, len(layer),
+                        bc.face, bc.body)
+        ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+        which = np.concatenate(which) if which else np.zeros(0, dtype=np.int32)
+        if len(np.unique(ids)) != len(ids):
+            dup = ids[np.nonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0][0]]
+            raise ConfigError(f"boundary[{self.index[int(which[ids == dup][-1])]}]",
+                              "holds particles another attached boundary holds (two faces of one corner)")
+        order = np.argsort(ids)
+        self.ids, self.which = ids[order], which[order]
+        #: default moment point of each support's reaction: the centroid of its held particles
+        self.centroids = {bc: c for bc, c in zip(self.boundaries, centroids)}
+        self._rows = None
+
+    # -- set-up -------------------------------------------------------------------------------
+    def mark(self, particles):
+        """Give ``particles`` the field ``support``: the support index holding each (-1: free).
+        It travels with the particles (migration, sorting, checkpoints)."""
+        particles.add_field("support", (), np.int32, -1)
+        pos = np.searchsorted(self.ids, particles["id"])
+        pos = np.minimum(pos, max(len(self.ids) - 1, 0))
+        if len(self.ids):
+            held = self.ids[pos] == particles["id"]
+            particles["support"][held] = self.which[pos[held]]
+
+    # -- each step ----------------------------------------------------------------------------
+    def _local_rows(self, solver):
+        """This rank's held particles' rows: (ids, support, nodes (n, R), weights (n, R))."""
+        p, g = solver.particles, self.grid
+        idx = np.nonzero(p["support"] >= 0)[0]
+        shape = solver.shape
+        nodes = np.empty((len(idx), row_width(shape)), dtype=np.int64)
+        weights = np.empty((len(idx), row_width(shape)))
+        if len(idx):
+            support_rows(idx, p["x"], g.origin, g.inv_h, g.cells[0], g.cells[1], shape, nodes, weights)
+        return idx, p["id"][idx], p["support"][idx], nodes, weights
+
+    def project(self, solver, field, impulse=False):
+        """Impose the supports on the nodal velocities in window fields ``field``, ``field + 1``
+        (1: after the grid update, whose velocity change in fields 3, 4 is corrected with them;
+        5: the MUSL re-mapped velocity). ``impulse``: the constraint's impulses are the step's
+        reaction (added to ``solver.reactions`` and the support work to the energy balance)."""
+        w, g = solver.window, self.grid
+        G = w.G
+        idx, ids, sup, nodes, weights = self._local_rows(solver)
+        ny = g.nodes[1]
+        # the nodes' data from this rank's window (complete after the halo sum)
+        valid = nodes >= 0
+        li = np.where(valid, nodes // ny - w.ox, 0)
+        lj = np.where(valid, nodes % ny - w.oy, 0)
+        mass = np.where(valid, G[li, lj, 0], 0.0)
+        vel = np.where(valid[..., None], G[li, lj, field:field + 2], 0.0)
+        fixed = np.where(valid[..., None], w.bc_mask[li, lj].astype(bool), False)
+        data = (ids, sup, nodes, weights, mass, vel, fixed)
+        if solver.comm.Get_size() > 1:
+            data = tuple(np.concatenate(parts) for parts in zip(*solver.comm.allgather(data)))
+        ids, sup, nodes, weights, mass, vel, fixed = data
+        if not len(ids):
+            return
+        order = np.argsort(ids, kind="stable")
+        sup, nodes, weights = sup[order], nodes[order], weights[order]
+        mass, vel, fixed = mass[order], vel[order], fixed[order]
+        valid = nodes >= 0
+        U, col = np.unique(nodes[valid], return_inverse=True)
+        n_rows = len(ids)
+        N = np.zeros((n_rows, len(U)))
+        rows = np.broadcast_to(np.arange(n_rows)[:, None], nodes.shape)[valid]
+        np.add.at(N, (rows, col), weights[valid])
+        m_U = np.zeros(len(U))
+        v_U = np.zeros((len(U), 2))
+        f_U = np.zeros((len(U), 2), dtype=bool)
+        m_U[col], v_U[col], f_U[col] = mass[valid], vel[valid], fixed[valid]
+        dv = np.zeros((len(U), 2))
+        J = np.zeros((len(U), 2, len(self.boundaries)))  # impulse per node, component, support
+        for d in range(2):
+            r = np.nonzero(self.hold[sup, d])[0]
+            if not len(r):
+                continue
+            Nd = N[r]
+            minv = np.where(f_U[:, d] | (m_U <= 0.0), 0.0, 1.0 / np.where(m_U > 0.0, m_U, 1.0))
+            A = (Nd * minv) @ Nd.T
+            rhs = Nd @ v_U[:, d] - self.vel[sup[r], d]
+            e, Q = np.linalg.eigh(A)
+            keep = e > RANK_TOLERANCE * max(e.max(), 0.0)
+            lam = Q[:, keep] @ ((Q[:, keep].T @ rhs) / e[keep])
+            contrib = Nd * lam[:, None]          # row p's share of N^T lambda at each node
+            dv[:, d] = -minv * contrib.sum(axis=0)
+            if impulse:
+                for b in range(len(self.boundaries)):
+                    J[:, d, b] = -np.where(minv > 0.0, contrib[sup[r] == b].sum(axis=0), 0.0)
+        # correct the nodes of this window (owned and ghost)
+        gi, gj = U // ny - w.ox, U % ny - w.oy
+        here = (gi >= 0) & (gi < w.shape[0]) & (gj >= 0) & (gj < w.shape[1])
+        G[gi[here], gj[here], field:field + 2] += dv[here]
+        if field == 1:
+            G[gi[here], gj[here], 3:5] += dv[here]
+        if impulse:
+            self._account(solver, U, J, v_U + dv, here, gi, gj)
+
+    def _account(self, solver, U, J, v_new, here, gi, gj):
+        """Reactions and work of the constraint impulses ``J`` over this rank's owned nodes."""
+        axis, lo, hi = solver._owned_local
+        k = gi if axis == 0 else gj
+        mine = here & (k >= lo) & (k < hi)
+        solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))
+        reactions = solver.reactions
+        if reactions is None:
+            return
+        g = self.grid
+        x = g.origin[0] + g.h * (U // g.nodes[1])
+        y = g.origin[1] + g.h * (U % g.nodes[1])
+        for b, k_bc in enumerate(self.index):
+            if k_bc not in reactions.index:
+                continue
+            row = reactions.index.index(k_bc)
+            Jx, Jy = J[mine, 0, b], J[mine, 1, b]
+            reactions.sums[row, 0] += Jx.sum()
+            reactions.sums[row, 1] += Jy.sum()
+            reactions.sums[row, 2] += np.sum(x[mine] * Jy) - np.sum(y[mine] * Jx)
+
+    def hold_particles(self, solver):
+        """The held particles' velocities take the prescribed components (after the grid-to-
+        particle transfer); the momentum this removes is the support's, added to its reaction
+        by the owner of each particle."""
+        p = solver.particles
+        idx = np.nonzero(p["support"] >= 0)[0]
+        if not len(idx):
+            return
+        sup = p["support"][idx]
+        hold = self.hold[sup]
+        target = np.where(hold, self.vel[sup], p["v"][idx])
+        change = p["m"][idx, None] * (target - p["v"][idx])
+        p["v"][idx] = target
+        reactions = solver.reactions
+        if reactions is None:
+            return
+        x = p["x"][idx]
+        for b, k_bc in enumerate(self.index):
+            if k_bc not in reactions.index:
+                continue
+            row = reactions.index.index(k_bc)
+            mine = sup == b
+            reactions.sums[row, 0] += change[mine, 0].sum()
+            reactions.sums[row, 1] += change[mine, 1].sum()
+            reactions.sums[row, 2] += np.sum(x[mine, 0] * change[mine, 1] - x[mine, 1] * change[mine, 0])
