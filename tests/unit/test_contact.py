@@ -205,14 +205,15 @@ def test_disks_bounce_apart_elastically(disks):
     energy after separation is the initial 2.513 J/m (within 5%; measured +1.9%). It is not
     all translation: the impact speed (0.28 m/s relative) is 45% of the shear wave speed
     (0.62 m/s), far from Hertz's quasi-static limit, and a fifth of the energy stays in the
-    disks as vibration: the rebound speed is 0.85 of the impact speed here (0.905 at half the
-    cell size, where the single field gives the same), so we ask for at least 0.8."""
+    disks as vibration. How much rebound is right is checked against an independent FE model of
+    the impact in tests/verification/test_disk_rebound.py (the MPM converges to its 0.914 under
+    refinement; 0.85 at this grid); here: reversed, along the line of centres, equal and
+    opposite."""
     h = disks["h"]
     after = h[:, 0] > 2.5
     assert h[after, 7].min() > 0.15
-    p0 = disks["mass"] * 0.1
     pa = h[after, 1:3]
-    assert np.all(pa < -0.8 * p0)
+    assert np.all(pa < 0)
     np.testing.assert_allclose(pa[:, 0], pa[:, 1], rtol=1e-6)  # along the diagonal
     np.testing.assert_allclose(h[after, 3:5], -pa, rtol=1e-9)
     mech = h[after, 6] / KE0
