@@ -24,7 +24,7 @@ EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 3
 EXIT_WRITE_FAILED = 4   # an output or checkpoint file could not be written (full disk, I/O)
 _FILE_SUFFIXES = (".toml", ".msh", ".vtk", ".vtu", ".inp", ".h5", ".at2", ".csv", ".txt")
-SUBCOMMANDS = ("run", "plot", "export", "bench")
+SUBCOMMANDS = ("run", "plot", "export", "bench", "expand")
 
 
 def _rank_env():
@@ -56,6 +56,18 @@ def _add_run(sub):
     return p
 
 
+def _add_expand(sub):
+    p = sub.add_parser("expand", help="write a scene's [frame] table out as ordinary bodies, boundaries, ...",
+                       description="Expand the [frame] table of a scene (nodes, members, sections, "
+                       "supports) into the ordinary scene pmpm runs: [[bodies]], [[boundary]], "
+                       "[[loads.forces]], [[output.section]], [[output.track]] (docs/scenes.md, Frames). "
+                       "The scene is validated first; nothing is written if it is bad.")
+    p.add_argument("case", help="scene file (TOML) with a [frame] table")
+    p.add_argument("-o", "--output", metavar="EXPANDED.toml", help="file to write (default: standard output)")
+    p.add_argument("--variant", help="apply this [variants.<name>] first (and write no variants)")
+    return p
+
+
 def build_parser():
     """Return the ``pmpm`` argument parser (subcommands run, plot, export, bench)."""
     p = _Parser(prog="pmpm", description="Explicit MPM for elastoplastic structures. "
@@ -64,8 +76,9 @@ def build_parser():
                 "docs/api.md (Python API).")
     p.add_argument("--version", action="version", version=f"pmpm {__version__}",
                    help="print the version and exit")
-    sub = p.add_subparsers(dest="command", metavar="{run,plot,export,bench}", title="subcommands")
+    sub = p.add_subparsers(dest="command", metavar="{run,plot,export,bench,expand}", title="subcommands")
     _add_run(sub)
+    _add_expand(sub)
     plot = sub.add_parser("plot", help="draw time histories and energies to PNG",
                           description="Plot the track histories and energies of results files; "
                           "several files (e.g. the variants of one scene) are overlaid.")
@@ -154,6 +167,54 @@ def _scenes(args):
     return load_scene(args.case, args.variant)
 
 
+def _frame_report(args):
+    """What the scene's [frame] generates (after the variant, when one is chosen)."""
+    from pmpm.scene.config import apply_overrides, read_toml
+    from pmpm.scene.frame import frame_report
+    data = read_toml(args.case)
+    if args.variant:
+        data = apply_overrides(data, data["variants"][args.variant], f"variants.{args.variant}")
+    return frame_report(data)
+
+
+def expand_case(args):
+    """``pmpm expand case.toml [-o out.toml]``: the scene with its frame expanded, as TOML."""
+    from pmpm.errors import ConfigError
+    from pmpm.scene.config import apply_overrides, load_scene, read_toml
+    from pmpm.scene.frame import expand_frame
+    from pmpm.scene.toml_writer import dumps
+    try:
+        load_scene(args.case, args.variant)  # every variant valid (or the one), as a run checks
+        data = read_toml(args.case)
+        if args.variant:
+            data = apply_overrides(data, data["variants"][args.variant], f"variants.{args.variant}")
+            data.pop("variants")
+        for name, overrides in data.get("variants", {}).items():
+            if any(k == "frame" or k.startswith("frame.") for k in overrides):
+                raise ConfigError(f"variants.{name}", "changes the [frame] table: expand it with "
+                                                      "--variant (an expanded file has no frame to change)")
+        if "frame" not in data:
+            raise ConfigError(args.case, "has no [frame] table to expand")
+        text = dumps(expand_frame(data), header=f"expanded by pmpm {__version__} from {os.path.basename(args.case)}"
+                     + (f", variant {args.variant}" if args.variant else "")
+                     + ": the bodies, boundaries, loads, section cuts\nand tracked points first in each "
+                       "list were generated from its [frame] table (docs/scenes.md, Frames)")
+    except ConfigError as exc:
+        return _bad_input(exc, args.case, 0)
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    if os.path.abspath(args.output) == os.path.abspath(args.case):
+        return _fail(f"{args.output}: would overwrite the scene being expanded", EXIT_BAD_INPUT)
+    try:
+        with open(args.output, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    except OSError as exc:
+        return _fail(f"{args.output}: cannot write ({exc.strerror or type(exc).__name__})", EXIT_WRITE_FAILED)
+    print(f"wrote {args.output}")
+    return 0
+
+
 def run_case(args):
     """``pmpm case.toml``: validate, run every variant, post-process. Returns the exit code."""
     from mpi4py import MPI
@@ -170,6 +231,8 @@ def run_case(args):
     if args.check:
         if rank == 0:
             print(f"{args.case}: valid ({len(scenes)} run(s))")
+            for line in _frame_report(args):
+                print(line)
         return 0
     if args.restart and len(scenes) > 1:
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",
@@ -227,6 +290,8 @@ def main(argv=None):
     args = build_parser().parse_args(_with_command(argv))
     if args.command == "run":
         return run_case(args)
+    if args.command == "expand":
+        return expand_case(args)
     return _tool(args)
 
 

@@ -671,7 +671,14 @@ def _materials(root, formulation):
 
 
 def parse_scene(data, path="<scene>"):
-    """Validate the TOML ``data`` of a scene and return a frozen :class:`Scene`."""
+    """Validate the TOML ``data`` of a scene and return a frozen :class:`Scene`.
+
+    A ``[frame]`` table is first expanded into ordinary bodies, boundaries, loads, section
+    cuts and tracked points (:func:`pmpm.scene.frame.expand_frame`): nothing after this line
+    knows about frames."""
+    if isinstance(data, dict) and "frame" in data:
+        from pmpm.scene.frame import expand_frame
+        data = expand_frame(data)
     root = Table(data, "")
     title = root.string("title", os.path.basename(path))
     formulation = root.string("formulation", "plane_stress", choices=FORMULATIONS)

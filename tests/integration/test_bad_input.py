@@ -83,6 +83,26 @@ def stop(keys, track="tip"):
     return add(f'[[output.track]]\nname = "tip"\npoint = [2.0, 0.5]\n[[stop]]\ntrack = "{track}"\n{keys}')
 
 
+
+def frame(nodes=None, members=None, supports=None, extra=""):
+    """A [frame] beside the block: a W12x120 column at x = 3 on the grid's lower edge; each
+    argument replaces that part (TOML text)."""
+    nodes = nodes if nodes is not None else ('[[frame.nodes]]\nname = "A"\nat = [3.0, 0.0]\n'
+                                             '[[frame.nodes]]\nname = "B"\nat = [3.0, 1.5]\n')
+    members = members if members is not None else ('[[frame.members]]\nname = "col"\nfrom = "A"\n'
+                                                   'to = "B"\nsection = "W12x120"\n')
+    supports = supports if supports is not None else '[[frame.supports]]\nnode = "A"\ntype = "fixed"\n'
+    return add('[frame]\nmaterial = "steel"\n' + extra + nodes + members + supports)
+
+
+def node(name, x, y):
+    return f'[[frame.nodes]]\nname = "{name}"\nat = [{x}, {y}]\n'
+
+
+def member(name, a, b, section="W12x120"):
+    return f'[[frame.members]]\nname = "{name}"\nfrom = "{a}"\nto = "{b}"\nsection = "{section}"\n'
+
+
 MESH_HEAD = "# vtk DataFile Version 4.2\nmesh\nASCII\nDATASET UNSTRUCTURED_GRID\n"
 MESH_MISSING_NODE = (MESH_HEAD + "POINTS 4 double\n0.5 0.5 0\n1.5 0.5 0\n1.5 1.5 0\n0.5 1.5 0\n"
                      "CELLS 2 8\n3 0 1 2\n3 0 2 9\nCELL_TYPES 2\n5\n5\n")
@@ -232,6 +252,32 @@ CASES = {
     "cpdi-with-contact": (lambda t: sub("end_time = 0.01", 'end_time = 0.01\ninterpolation = "cpdi"')(t)
                           + "\n[contact]\nfriction = 0.0\n", {}, ["--check"], 2,
                           "solver.interpolation: the contact solver's kernels use point B-splines only"),
+    # 9. the frame front end (issue 22): each refusal names the frame entry
+    "frame-coincident-nodes": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.0, 1.5),
+                                     members=member("col", "A", "B") + member("stub", "B", "B")),
+                               {}, ["--check"], 2, "frame.members[1].to: member 'stub' joins coincident nodes"),
+    "frame-node-unreached": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.0, 1.5) + node("C", 3.5, 1.5)),
+                             {}, ["--check"], 2, "frame.nodes[2]: no member reaches node 'C'"),
+    "frame-unknown-section": (frame(members=member("col", "A", "B", "W12x12O")), {}, ["--check"], 2,
+                              "frame.members[0].section: unknown section 'W12x12O' (closest: W12X120"),
+    "frame-support-no-node": (frame(supports='[[frame.supports]]\nnode = "Q"\ntype = "fixed"\n'),
+                              {}, ["--check"], 2, "frame.supports[0].node: no node named 'Q'"),
+    "frame-overlap-unjoined": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.0, 1.5) + node("C", 3.1, 0.5)
+                                     + node("D", 3.1, 1.0),
+                                     members=member("col", "A", "B") + member("col2", "C", "D")),
+                               {}, ["--check"], 2, "frame.members[1]: member 'col2' overlaps member 'col' "
+                                                   "without a node joining them"),
+    "frame-outside-grid": (frame(nodes=node("A", 3.9, 0.0) + node("B", 3.9, 1.5)), {}, ["--check"], 2,
+                           "frame.members[0]: member 'col' lies outside the grid"),
+    "frame-inclined": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.5, 1.5)), {}, ["--check"], 2,
+                       "frame.members[0].to: member 'col' is inclined"),
+    "frame-support-off-line": (frame(nodes=node("A", 3.0, 0.1) + node("B", 3.0, 1.5)), {}, ["--check"], 2,
+                               "frame.supports[0].node: support node 'A' at y = 0.1 is not on a grid node line"),
+    "frame-node-twice": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.0, 1.5) + node("A", 3.0, 1.0)),
+                         {}, ["--check"], 2, "frame.nodes[2].name: node name 'A' is already used"),
+    "frame-typo": (frame(extra="cut_ofset = 0.1\n"), {}, ["--check"], 2, "frame.cut_ofset: unknown key"),
+    "frame-support-type": (frame(supports='[[frame.supports]]\nnode = "A"\ntype = "hinge"\n'), {},
+                           ["--check"], 2, "frame.supports[0].type: must be one of fixed, pinned, roller"),
 }
 
 

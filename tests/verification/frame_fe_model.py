@@ -141,6 +141,9 @@ def read_scene(path=SCENE, variant="elastic", track="upper_left_joint"):
     """
     with open(path, "rb") as fh:
         s = tomllib.load(fh)
+    if "frame" in s:  # written as a frame: read the ordinary scene it stands for (data only)
+        from pmpm.scene.frame import expand_frame
+        s = expand_frame(s)
     mat = dict(s["materials"]["steel"])
     mat.update(s.get("variants", {}).get(variant, {}).get("materials.steel", {}))
     if mat["type"] != "linear_elastic":

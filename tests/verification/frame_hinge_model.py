@@ -31,8 +31,8 @@ __all__ = ["HingeFrame", "portal_hinge_frame", "hinge_response", "HINGES", "CUTS
 
 #: hinge locations and the cuts of cases/portal_frame.toml, by name
 HINGES = ("left_base", "right_base", "left_column_top", "right_column_top", "beam_left_end", "beam_right_end")
-CUTS = ("left_column_base", "right_column_base", "left_column_top", "right_column_top",
-        "beam_left_end", "beam_right_end")
+CUTS = ("left_column_left_base", "right_column_right_base", "left_column_upper_left_joint",
+        "right_column_upper_right_joint", "beam_upper_left_joint", "beam_upper_right_joint")
 RIGID = 1e3   # stiffness factor of rigid links and of the hinges' translational ties
 #: elastic stiffness of a hinge's rotational spring in units of its member's 4 EI / L: stiff
 #: enough to add only about 2% to a member's end flexibility, soft enough for Newton to find
@@ -210,9 +210,9 @@ def portal_hinge_frame(n=8, sections=None, stub_mass=True):
               dict(name="beam_left_end", a=face_l, b=bids[0], k=kb, Mp=mp_b, length=Lb),
               dict(name="beam_right_end", a=bids[-1], b=face_r, k=kb, Mp=mp_b, length=Lb)]
     # the fixed base nodes: their rotation is fixed, the hinge spring ties the column to them
-    cuts = {"left_column_base": (cols[0]["cut_base_el"], 0), "right_column_base": (cols[1]["cut_base_el"], 0),
-            "left_column_top": (cols[0]["cut_top_el"], 1), "right_column_top": (cols[1]["cut_top_el"], 1),
-            "beam_left_end": (bfirst + 1, 0), "beam_right_end": (bfirst + n, 1)}
+    cuts = {"left_column_left_base": (cols[0]["cut_base_el"], 0), "right_column_right_base": (cols[1]["cut_base_el"], 0),
+            "left_column_upper_left_joint": (cols[0]["cut_top_el"], 1), "right_column_upper_right_joint": (cols[1]["cut_top_el"], 1),
+            "beam_upper_left_joint": (bfirst + 1, 0), "beam_upper_right_joint": (bfirst + n, 1)}
     frame = HingeFrame(model, hinges, 3 * cols[0]["joint"], cuts)
     frame.load_dof = 3 * cols[0]["joint"]
     return frame

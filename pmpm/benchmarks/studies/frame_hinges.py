@@ -78,7 +78,12 @@ def _table(factor, rows):
 
 
 #: distance from each cut to its member's end, towards the start (+) or the end (-) side
-END_OFFSET = {"left_column_base": 0.2, "right_column_base": 0.2, "beam_left_end": 0.15, "beam_right_end": -0.15}
+END_OFFSET = {"left_column_left_base": 0.2, "right_column_right_base": 0.2, "beam_upper_left_joint": 0.15,
+              "beam_upper_right_joint": -0.15}
+#: the hinge model's name of the hinge nearest each cut of the scene
+HINGE_OF_CUT = {"left_column_left_base": "left_base", "right_column_right_base": "right_base",
+                "left_column_upper_left_joint": "left_column_top", "right_column_upper_right_joint": "right_column_top",
+                "beam_upper_left_joint": "beam_left_end", "beam_upper_right_joint": "beam_right_end"}
 
 
 def _hinge_model():
@@ -105,14 +110,14 @@ def compare(factor, outdir):
         s, a = tables["sections"][name], tables["sections"][name]["attrs"]
         end = (first_reached(s["time"], s["M"] + END_OFFSET[name] * s["V"], a["Mp"])
                if name in END_OFFSET else math.nan)
-        hinge = {"left_column_base": "left_base", "right_column_base": "right_base"}.get(name, name)
+        hinge = HINGE_OF_CUT[name]
         rows[name] = {"mpm_My": first_reached(s["time"], s["M"], a["My"]),
                       "mpm_Mp": first_reached(s["time"], s["M"], a["Mp"]), "mpm_end_Mp": end,
                       "model_cut_My": first_reached(model["t"], model["cut_moments"][:, k], a["My"]),
                       "model_cut_max": float(np.abs(model["cut_moments"][:, k]).max() / a["Mp"]),
                       "model_hinge_Mp": model["first_mp"][hinge]}
     for name, r in tables["reactions"].items():
-        a = tables["sections"][name.replace("base", "column_base")]["attrs"]
+        a = tables["sections"][{"left_base": "left_column_left_base", "right_base": "right_column_right_base"}[name]]["attrs"]
         rows[f"reaction {name}"] = {"mpm_end_Mp": first_reached(r["time"], np.nan_to_num(r["M"]), a["Mp"]),
                                     "max_M/Mp": float(np.nanmax(np.abs(r["M"])) / a["Mp"])}
     rows["model"] = {"order": model["order"], "max_drift": float(model["drift"].max())}

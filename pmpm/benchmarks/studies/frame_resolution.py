@@ -378,7 +378,7 @@ def continuum_estimates(cells=(0.1, 0.05, 0.025)):
     ]
     strips = {}
     for h in cells:
-        rows_c, t_c, geo_c = strip_profile(h, "left column")
+        rows_c, t_c, geo_c = strip_profile(h, "left_column")
         rows_b, t_b, geo_b = strip_profile(h, "beam")
         a_c = shear_area(rows_c, t_c, geo_c["depth"])
         a_b = shear_area(rows_b, t_b, geo_b["depth"])
