@@ -30,7 +30,7 @@ __all__ = ["Run", "output_path"]
 logger = logging.getLogger(__name__)
 
 ENERGY_COLUMNS = ("time", "kinetic", "strain_energy", "plastic_work", "internal_work", "damping_work",
-                  "external_work", "total")
+                  "viscous_damping_work", "removed_energy", "external_work", "total")
 #: the solver's name of an energy where the file's differs (the file keeps "strain" for the field)
 _SOLVER_ENERGY = {"strain_energy": "strain"}
 
@@ -110,6 +110,8 @@ class _Snapshot:
         self.external_work = solver.external_work
         self.internal_work = solver.internal_work
         self.damping_work = solver.damping_work
+        self.viscous_damping_work = solver.viscous_damping_work
+        self.removed_energy = solver.removed_energy
 
 
 class Run:
@@ -333,6 +335,8 @@ class Run:
         s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
         s.initial_energy = float(attrs["initial_energy"])
         s.damping_work = float(attrs.get("damping_work", 0.0)) if self.rank == 0 else 0.0
+        s.viscous_damping_work = float(attrs.get("viscous_damping_work", 0.0)) if self.rank == 0 else 0.0
+        s.removed_energy = float(attrs.get("removed_energy", 0.0)) if self.rank == 0 else 0.0
         s.removed = int(attrs.get("removed", 0))
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
@@ -406,12 +410,14 @@ class Run:
         from pmpm.io.checkpoint import _next_slot
         target = path or (_next_slot(self._base()) if self.rank == 0 else None)
         self._ensure_space(target or self.path, s.n_total * self._row_bytes(snap.fields), replaces=target)
-        ext, internal, damped = self.comm.allreduce(
-            np.array([snap.external_work, snap.internal_work, snap.damping_work]))
+        ext, internal, damped, viscous, removed = self.comm.allreduce(
+            np.array([snap.external_work, snap.internal_work, snap.damping_work, snap.viscous_damping_work,
+                      snap.removed_energy]))
         return write_checkpoint(
             _checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
             {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
              "internal_work": float(internal), "damping_work": float(damped),
+             "viscous_damping_work": float(viscous), "removed_energy": float(removed),
              "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
              "scene_file": _scene_location(self.scene.path, self.path), "variant": self.scene.variant,
              "pmpm_owner": self.scene.stem,
@@ -492,7 +498,9 @@ class Run:
                        "large rotations: no stress rotation (every material computes its stress from F)")
         if s.keeps_F:
             out.append("deformation gradient F per particle")
-        if s.damping is not None:
+        if s.rayleigh is not None:
+            out.append(s.rayleigh.describe())
+        elif s.damping is not None:
             out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
         if s.ground is not None:
             out.append(s.ground.describe())

@@ -30,6 +30,7 @@ from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
 from pmpm.physics.supports import HeldFaces
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow, choose_tile
+from pmpm.physics.damping import RayleighDamping, undamped_cfl_limit
 from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
@@ -110,7 +111,12 @@ class Solver:
         check_boundaries(scene.boundaries, self.grid)
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
                        if scene.loads.ground_motion else None)
-        self.damping = scene.loads.damping or None  # None compiles the damping out
+        # Rayleigh damping by ratio: its mass part is the nodal mass-proportional damping, its
+        # stiffness part a viscous stress on the particles (None: neither exists in the step)
+        self.rayleigh = (RayleighDamping(scene.loads.rayleigh, self.materials)
+                         if scene.loads.rayleigh else None)
+        mass_part = self.rayleigh.a0 if self.rayleigh is not None else scene.loads.damping
+        self.damping = mass_part or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
         # supports attached to a body hold its face's particles (None: the scene has none)
         self.supports = (HeldFaces(scene.boundaries, scene.bodies, points, self.grid)
@@ -139,6 +145,8 @@ class Solver:
             start_deformation(self.particles)
         if self.supports is not None:
             self.supports.mark(self.particles)
+        if self.rayleigh is not None:
+            self.rayleigh.add_fields(self.particles)
         if self.interpolation != "point":
             self._add_domains()
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
@@ -155,6 +163,7 @@ class Solver:
         self.external_work = 0.0   # this rank's share; summed when reported
         self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
         self.damping_work = 0.0    # energy taken out by mass-proportional damping (owned nodes)
+        self.removed_energy = 0.0  # kinetic energy carried out by particles an event removed
         self.removed = 0
         self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
@@ -227,7 +236,12 @@ class Solver:
         """CFL time step C h / (c + |v|max), or the scene's fixed step."""
         if self.scene.solver.time_step is not None:
             return self.scene.solver.time_step
-        return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
+        dt = self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
+        if self.rayleigh is not None:  # the viscous stress shortens the stable step
+            cfg = self.scene.solver
+            dt *= self.rayleigh.stable_step_factor(self.wave_speed + vmax, self.grid.h,
+                                                   undamped_cfl_limit(cfg.shape_function, cfg.interpolation))
+        return dt
 
     def critical_dt(self):
         """The largest stable step by the CFL rule with C = 1 (for warnings and messages), with
@@ -257,12 +271,21 @@ class Solver:
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
         p = self.particles
         gravity = self.loads.gravity if forces else None
-        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], self.force_stress() if forces else None,
               gravity, None, None, None, *self._geometry())
         point = self.loads.point_forces(p, self.t) if forces else None
         if point is not None:
             idx, load_id, load_w, load_vec = point
             K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *self._geometry())
+
+    def force_stress(self):
+        """The stress whose divergence is the internal force: the particles' stress, plus the
+        viscous stress of Rayleigh damping when the scene asks for it."""
+        p = self.particles
+        if self.rayleigh is None:
+            return p["stress"]
+        return self.rayleigh.force_stress(p["stress"], p[self.rayleigh.FIELD],
+                                          self._scratch("_force_stress_buf", (p.n, 3)))
 
     def exchange_halo(self, fields):
         """HALO: every rank's contributions summed in the owned and the ghost columns alike
@@ -376,6 +399,8 @@ class Solver:
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
                                             material.E, material.nu, p["mat"], k if several else -1)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+        if self.rayleigh is not None:
+            self.rayleigh.update(p, self._de, self._dt_step)
 
     def _rotate(self, t):
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
@@ -552,15 +577,18 @@ class Solver:
     def energies(self, summed=None):
         """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
         work, internal work (integrated stress power: strain + dissipation, exact for any
-        material), external work, damping work, and ``total`` = kinetic + internal work +
-        damping work, which equals the external work plus the initial kinetic energy when the
+        material), external work, damping work (mass-proportional), viscous damping work (the
+        stiffness part of Rayleigh damping), the energy removed particles carried out
+        (``removed_energy``), and ``total`` = kinetic + internal work + both damping works +
+        removed energy, which equals the external work plus the initial kinetic energy when the
         run conserves energy. ``summed``: ``local_energies()`` already summed over the ranks
         (by a reduction shared with other figures), else summed here (collective)."""
         if summed is None:
             summed = self.decomp.allreduce_sum(self.local_energies())
-        ke, se, pw, wi, we, wd = summed
+        ke, se, pw, wi, we, wd, wv, er = summed
         return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "total": ke + wi + wd}
+                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
+                "removed_energy": er, "total": ke + wi + wd + wv + er}
 
     def local_energies(self):
         """This rank's shares of the energies, in the order ``energies`` reads them."""
@@ -574,4 +602,15 @@ class Solver:
                      K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
                      for k, m in enumerate(self.materials))
         plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
-        return np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work])
+        return np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work,
+                         self.viscous_damping_work, self.removed_energy])
+
+    @property
+    def viscous_damping_work(self):
+        """This rank's share of the energy the viscous stress of Rayleigh damping dissipated."""
+        return self.rayleigh.work if self.rayleigh is not None else 0.0
+
+    @viscous_damping_work.setter
+    def viscous_damping_work(self, value):
+        if self.rayleigh is not None:
+            self.rayleigh.work = value

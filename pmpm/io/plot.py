@@ -6,10 +6,11 @@ a program that imported pmpm.
 
 Energy balance error
 --------------------
-The balance is ``B = kinetic + internal_work - external_work`` when an
-``internal_work`` column (the integrated stress power: stored strain energy plus
-dissipation) is present, else ``B = kinetic + strain_energy + plastic_work + damping_work -
-external_work`` (absent terms count as zero), else the ``total`` column.  The
+The balance is ``B = kinetic + internal_work + damping_work + viscous_damping_work +
+removed_energy - external_work`` when an ``internal_work`` column (the integrated stress
+power: stored strain energy plus dissipation) is present, else ``B = kinetic + strain_energy +
+plastic_work + damping_work + viscous_damping_work + removed_energy - external_work`` (absent
+terms count as zero), else the ``total`` column.  The
 plotted error is ``(B - B[0]) / scale`` with ``scale`` the largest magnitude of the
 energy held by the body (kinetic + internal) or of the external work, so 0.01 means
 1 % of the energy in play.
@@ -37,6 +38,8 @@ __all__ = ["plot_results", "plot_deformed", "energy_balance_error", "scene_stem"
 logger = logging.getLogger(__name__)
 
 STORED = ("kinetic", "strain_energy", "plastic_work", "damping_work")
+#: energy that left the body: dissipated by damping or carried out by removed particles
+LEFT = ("damping_work", "viscous_damping_work", "removed_energy")
 DISPLACEMENTS = ("ux", "uy", "uz")
 
 
@@ -105,7 +108,9 @@ def energy_balance_error(energies):
     work = columns.get("external_work", np.zeros(n))
     if "kinetic" in columns:
         # internal_work, when given, already holds strain energy plus dissipation
-        held_terms = ("internal_work",) if "internal_work" in columns else STORED[1:]
+        # and the energy taken out of the body (damping, removed particles) counts as held
+        held_terms = (("internal_work",) if "internal_work" in columns else STORED[1:]) + LEFT
+        held_terms = tuple(dict.fromkeys(held_terms))
         held = columns["kinetic"] + sum(columns[c] for c in held_terms if c in columns)
         balance = held - work
         scale = max(np.nanmax(np.abs(held)), np.nanmax(np.abs(work)))

@@ -60,9 +60,13 @@ ENERGIES = {
                            "(not the strain field /frames/strain)"),
     "plastic_work": ("J", "plastic work, dissipated"),
     "internal_work": ("J", "integrated stress power: strain energy plus dissipation"),
-    "damping_work": ("J", "work done by mass-proportional damping, dissipated"),
+    "damping_work": ("J", "work done by mass-proportional damping (the mass part of Rayleigh damping), dissipated"),
+    "viscous_damping_work": ("J", "work done by the viscous stress of Rayleigh damping (its stiffness part), "
+                                  "dissipated"),
+    "removed_energy": ("J", "energy carried out of the run by particles a scene event removed (their kinetic "
+                            "energy at removal, less the internal work their fading stress did not transmit)"),
     "external_work": ("J", "work of loads, boundary motion and ground motion"),
-    "total": ("J", "kinetic + internal_work + damping_work; equals external_work plus the "
+    "total": ("J", "kinetic + internal_work + damping_work + viscous_damping_work + removed_energy; equals external_work plus the "
                    "initial kinetic energy when the run conserves energy"),
 }
 

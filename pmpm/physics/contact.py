@@ -134,7 +134,7 @@ class ContactSolver(Solver):
         p = self.particles
         gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
         KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
-                      p["stress"] if forces else None, p["body"], self.slot_of,
+                      self.force_stress() if forces else None, p["body"], self.slot_of,
                       gravity, load_id, load_w, load_vec, *self._body_geometry())
 
     def exchange_halo(self, fields):

@@ -200,6 +200,15 @@ CASES = {
                        "solver.time_step: must be > 0"),
     "allow-unstable-not-bool": (sub("end_time = 0.01", "end_time = 0.01\nallow_unstable_time_step = 1"), {},
                                 ["--check"], 2, "solver.allow_unstable_time_step: must be true or false"),
+    # 4b. Rayleigh damping by ratio (issue 23)
+    "damping-ratio-negative": (add('[loads]\ndamping = {ratio = -0.1, periods = [0.1, 0.05]}'), {}, ["--check"], 2,
+                               "loads.damping.ratio: must be >= 0"),
+    "damping-ratio-above-one": (add('[loads]\ndamping = {ratio = 1.5, periods = [0.1, 0.05]}'), {}, ["--check"], 2,
+                                "loads.damping.ratio: must be <= 1"),
+    "damping-period-zero": (add('[loads]\ndamping = {ratio = 0.05, periods = [0.1, 0.0]}'), {}, ["--check"], 2,
+                            "loads.damping.periods: must be two periods > 0"),
+    "damping-period-negative-run": (add('[loads]\ndamping = {ratio = 0.05, periods = [-0.1, 0.05]}'), {}, [], 2,
+                                    "loads.damping.periods: must be two periods > 0"),
     # 5. geometry
     "polygon-bow-tie": (body('shape = "polygon"\nvertices = [[2.5, 0.5], [3.5, 1.5], [3.5, 0.5], [2.5, 1.5]]'),
                         {}, ["--check"], 2, "bodies[1].vertices:"),

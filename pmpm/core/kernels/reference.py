@@ -7,7 +7,7 @@ node", independently of the numba code paths.
 import numpy as np
 
 __all__ = ["bspline_1d", "gimp_1d", "cpdi_basis_matrix", "basis_matrix", "p2g_reference", "g2p_velocity_reference",
-           "g2p_kinematics_reference", "g2p_deformation_reference", "reaction_reference"]
+           "g2p_kinematics_reference", "g2p_deformation_reference", "reaction_reference", "viscous_stress_reference"]
 
 
 def _standard(order, xi):
@@ -195,3 +195,17 @@ def reaction_reference(G, dt, bc_mask, bc_vel, ids, n, x0, y0, h):
         sx, sy = ids[..., 0] == b, ids[..., 1] == b
         out[b] = (J[sx, 0].sum(), J[sy, 1].sum(), np.sum(X[sy] * J[sy, 1]) - np.sum(Y[sx] * J[sx, 0]))
     return out
+
+
+def viscous_stress_reference(sv, de, vol, dt, a1, E, nu, plane_strain):
+    """NumPy twin of ``pmpm.core.kernels.damping.viscous_stress`` (one material): returns
+    (new sv, work) with work = sum V sv : de and new sv = (a1 / dt) C de, C the elastic
+    tangent matrix (plane stress, or the in-plane rows of plane strain)."""
+    if plane_strain:
+        lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+        mu = E / (2 * (1 + nu))
+        C = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
+    else:
+        C = E / (1 - nu ** 2) * np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]])
+    work = float(np.sum(vol * np.einsum("pk,pk->p", sv, de)))
+    return (a1 / dt) * de @ C.T, work
