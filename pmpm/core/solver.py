@@ -41,7 +41,7 @@ from pmpm.results.reactions import Reactions
 from pmpm.results.sections import make_cuts
 from pmpm.scene.limits import check_memory, check_time_step
 
-__all__ = ["Solver", "needs_deformation_gradient"]
+__all__ = ["Solver", "needs_deformation_gradient", "numerical_loss"]
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -67,6 +67,26 @@ def needs_deformation_gradient(scene, materials):
             or (cfg.large_rotations and cfg.objective_rate == "green_naghdi")
             or cfg.interpolation == "cpdi"
             or "F" in scene.output.fields)
+
+
+def numerical_loss(initial, external, kinetic, strain, plastic, damping):
+    """The energy lost to the discretisation (J): what the loads and the initial state put in
+    and no physical term holds or dissipated,
+    ``initial + external - kinetic - strain - plastic - damping``.
+
+    ``initial`` is the energy at the start (``Solver.initial_energy``: the kinetic energy, the
+    bodies start unstressed). Positive: energy lost (numerical damping of the transfers and
+    the time integration); negative: energy gained. The stress power integrated over the
+    steps (``internal_work``) is not used: the strain energy of the current stresses is what
+    the body can give back, so a loss between the two shows here too.
+
+    Parameters
+    ----------
+    initial, external, kinetic, strain, plastic, damping : float or numpy.ndarray
+        The energies in J, as ``Solver.energies`` names them (plastic: the plastic work,
+        damping: the work of mass-proportional damping).
+    """
+    return initial + external - kinetic - strain - plastic - damping
 
 
 def _scene_dir(scene):
@@ -552,8 +572,10 @@ class Solver:
         if summed is None:
             summed = self.decomp.allreduce_sum(self.local_energies())
         ke, se, pw, wi, we, wd = summed
+        e0 = getattr(self, "initial_energy", ke + wi + wd)   # at construction: this very state
         return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "total": ke + wi + wd}
+                "external_work": we, "damping_work": wd, "total": ke + wi + wd,
+                "numerical_loss": numerical_loss(e0, we, ke, se, pw, wd)}
 
     def local_energies(self):
         """This rank's shares of the energies, in the order ``energies`` reads them."""
