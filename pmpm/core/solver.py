@@ -33,6 +33,7 @@ from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
+from pmpm.core.transfers import make_transfer
 from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
@@ -124,6 +125,7 @@ class Solver:
         if local is not None:
             local.Free()
         self.scheme = make_scheme(cfg.scheme)
+        self.transfer = make_transfer(cfg.transfer)
         self.loads = Loads(scene.loads)
         check_boundaries(scene.boundaries, self.grid)
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
@@ -150,6 +152,8 @@ class Solver:
         self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
         if self.keeps_F:
             start_deformation(self.particles)
+        for name, shape in self.transfer.fields.items():   # APIC's affine velocity; none for FLIP
+            self.particles.add_field(name, shape)
         if self.interpolation != "point":
             self._add_domains()
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
@@ -275,9 +279,7 @@ class Solver:
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
         p = self.particles
-        gravity = self.loads.gravity if forces else None
-        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
-              gravity, None, None, None, *self._geometry())
+        self.transfer.p2g(self, momentum, forces)
         point = self.loads.point_forces(p, self.t) if forces else None
         if point is not None:
             idx, load_id, load_w, load_vec = point
@@ -308,11 +310,11 @@ class Solver:
                                0, w.shape[0], 0, w.shape[1], w.tiles)
 
     def grid_to_particles(self, remap):
-        """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
+        """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
+        also re-maps their momenta."""
         p = self.particles
         self._dx = self._scratch("_dx_buf", (p.n, 2))
-        vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
-                                   *self._geometry(), remap, self._dx, self._dt_step)
+        vmax, bad = self.transfer.g2p(self, remap)
         self._vmax_local, self._bad_local = vmax, bad
 
     def _kinematics_outputs(self):
