@@ -125,7 +125,7 @@ class Solver:
         if local is not None:
             local.Free()
         self.scheme = make_scheme(cfg.scheme)
-        self.transfer = make_transfer(cfg.transfer)
+        self.transfer = make_transfer(cfg.transfer, **({"order": cfg.xpic_order} if cfg.transfer == "xpic" else {}))
         self.loads = Loads(scene.loads)
         check_boundaries(scene.boundaries, self.grid)
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))

@@ -101,7 +101,8 @@ class SolverConfig:
     interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp", "cpdi" (pmpm.core.shape)
     max_estimated_steps: int = 10_000_000
     allow_unstable_time_step: bool = False
-    transfer: str = "flip"   # particle <-> grid velocity transfer: "flip" (with pic_blend) or "apic"
+    transfer: str = "flip"   # particle <-> grid velocity transfer: "flip" (with pic_blend), "apic", "xpic"
+    xpic_order: int = 2      # m of XPIC(m) (1: PIC)
 
 
 @dataclass(frozen=True)
@@ -519,8 +520,8 @@ def _loads(root):
 
 #: objective stress rates of the hypoelastic models (pmpm.core.kernels.objective)
 OBJECTIVE_RATES = ("jaumann", "green_naghdi")
-#: velocity transfers (pmpm.core.transfers): FLIP (the paper's, with the PIC blend) and APIC
-TRANSFERS = ("flip", "apic")
+#: velocity transfers (pmpm.core.transfers): FLIP (the paper's, with the PIC blend), APIC, XPIC(m)
+TRANSFERS = ("flip", "apic", "xpic")
 
 
 def _solver(t):
@@ -547,7 +548,16 @@ def _solver(t):
         interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS),
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
         allow_unstable_time_step=t.boolean("allow_unstable_time_step", False),
-        transfer=t.string("transfer", "flip", choices=TRANSFERS))
+        transfer=t.string("transfer", "flip", choices=TRANSFERS),
+        xpic_order=t.integer("xpic_order", 2, low=1))
+    if t.has("xpic_order") and s.transfer != "xpic":
+        raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
+    if s.transfer == "xpic":
+        if s.interpolation != "point":
+            raise ConfigError(t.path("transfer"), f"xpic is defined for point particles, not "
+                                                  f"interpolation = {s.interpolation!r}")
+        if s.pic_blend:
+            raise ConfigError(t.path("pic_blend"), "is FLIP's; xpic updates the velocity from the grid alone")
     if s.transfer == "apic":
         if s.shape_function == "linear":
             raise ConfigError(t.path("transfer"), "apic needs quadratic or cubic B-splines (with linear "
