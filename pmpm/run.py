@@ -26,13 +26,24 @@ from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
 from pmpm.stop import make_stop_check
 from pmpm.results.recorder import UNITS, StructuralRecorder
 
-__all__ = ["Run", "output_path"]
+__all__ = ["Run", "output_path", "energy_summary"]
 logger = logging.getLogger(__name__)
 
 ENERGY_COLUMNS = ("time", "kinetic", "strain_energy", "plastic_work", "internal_work", "damping_work",
-                  "viscous_damping_work", "removed_energy", "external_work", "total")
+                  "viscous_damping_work", "removed_energy", "external_work", "total", "numerical_loss")
 #: the solver's name of an energy where the file's differs (the file keeps "strain" for the field)
 _SOLVER_ENERGY = {"strain_energy": "strain"}
+
+
+def energy_summary(e):
+    """The run summary's energy line: the external work and the numerical loss (J), the loss
+    also as a fraction of the energy put in (initial energy plus external work)."""
+    # initial energy + external work: by the definition of the loss, the terms and the loss
+    supplied = e["kinetic"] + e["strain"] + e["plastic_work"] + e["damping_work"] + e["numerical_loss"]
+    share = f" ({100 * e['numerical_loss'] / supplied:.3g}% of the energy put in)" if supplied > 0 else ""
+    return (f"external work {e['external_work']:.6g} J, kinetic {e['kinetic']:.6g} J, strain "
+            f"{e['strain']:.6g} J, plastic {e['plastic_work']:.6g} J, damping {e['damping_work']:.6g} J, "
+            f"numerical loss {e['numerical_loss']:.6g} J{share}")
 
 
 def output_path(scene):
@@ -290,7 +301,9 @@ class Run:
                  "variant": self.scene.variant, "title": self.scene.title,
                  "scene_file": _scene_location(self.scene.path, self.path),
                  "pmpm_owner": self.scene.stem,  # the record pmpm.io.ownership reads
-                 "scene_fingerprint": self.fingerprint, "history_columns": list(HISTORY_COLUMNS)}
+                 "scene_fingerprint": self.fingerprint, "history_columns": list(HISTORY_COLUMNS),
+                 # J: the start of the numerical loss (/energies/numerical_loss)
+                 "initial_energy": float(self.solver.initial_energy)}
         return OutputFile(self.path, self.comm, attrs, self.solver.n_total, self._frame_fields(),
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
@@ -577,9 +590,13 @@ class Run:
                 self.fail(exc, snap)
                 raise
         self.close()
+        e = s.energies()   # collective: every rank executes
         summary = {"steps": s.step_count, "time": s.t, "wall": wall, "particles": s.n_total,
                    "removed": s.removed, "output": self.path if self.write else None,
-                   "end_reason": end_reason, "stopped": self.stopped}
+                   "end_reason": end_reason, "stopped": self.stopped,
+                   "external_work": e["external_work"], "numerical_loss": e["numerical_loss"]}
+        if self.rank == 0:
+            logger.info("energy: %s", energy_summary(e))
         if s.removed and self.rank == 0:  # a global count
             logger.warning("%d particle(s) left the grid and were removed", s.removed)
         return summary

@@ -35,6 +35,7 @@ from pmpm.physics.groundmotion import GroundMotion
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
+from pmpm.core.transfers import make_transfer
 from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
 from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
@@ -43,7 +44,7 @@ from pmpm.results.reactions import Reactions
 from pmpm.results.sections import make_cuts
 from pmpm.scene.limits import check_memory, check_time_step
 
-__all__ = ["Solver", "needs_deformation_gradient"]
+__all__ = ["Solver", "needs_deformation_gradient", "numerical_loss"]
 MOM_FIELD = K.MOM
 logger = logging.getLogger(__name__)
 
@@ -70,6 +71,29 @@ def needs_deformation_gradient(scene, materials):
             or (cfg.large_rotations and cfg.objective_rate == "green_naghdi")
             or cfg.interpolation == "cpdi"
             or "F" in scene.output.fields)
+
+
+def numerical_loss(initial, external, kinetic, strain, plastic, damping, viscous=0.0, removed=0.0):
+    """The energy lost to the discretisation (J): what the loads and the initial state put in
+    and no physical term holds, dissipated or took out of the run,
+    ``initial + external - kinetic - strain - plastic - damping - viscous - removed``.
+
+    ``initial`` is the energy at the start (``Solver.initial_energy``: the kinetic energy, the
+    bodies start unstressed). Positive: energy lost (numerical damping of the transfers and
+    the time integration); negative: energy gained. The stress power integrated over the
+    steps (``internal_work``) is not used: the strain energy of the current stresses is what
+    the body can give back, so a loss between the two shows here too.
+
+    Parameters
+    ----------
+    initial, external, kinetic, strain, plastic, damping : float or numpy.ndarray
+        The energies in J, as ``Solver.energies`` names them (plastic: the plastic work,
+        damping: the work of mass-proportional damping).
+    viscous, removed : float or numpy.ndarray, optional
+        The work of Rayleigh damping's stiffness part and the energy of the particles a scene
+        event removed (J; zero where the scene has neither).
+    """
+    return initial + external - kinetic - strain - plastic - damping - viscous - removed
 
 
 def _scene_dir(scene):
@@ -107,6 +131,7 @@ class Solver:
         if local is not None:
             local.Free()
         self.scheme = make_scheme(cfg.scheme)
+        self.transfer = make_transfer(cfg.transfer, **({"order": cfg.xpic_order} if cfg.transfer == "xpic" else {}))
         self.loads = Loads(scene.loads)
         check_boundaries(scene.boundaries, self.grid)
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
@@ -147,6 +172,8 @@ class Solver:
             self.supports.mark(self.particles)
         if self.rayleigh is not None:
             self.rayleigh.add_fields(self.particles)
+        for name, shape in self.transfer.fields.items():   # APIC's affine velocity; none for FLIP
+            self.particles.add_field(name, shape)
         if self.interpolation != "point":
             self._add_domains()
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
@@ -270,9 +297,12 @@ class Solver:
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
         p = self.particles
-        gravity = self.loads.gravity if forces else None
-        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], self.force_stress() if forces else None,
-              gravity, None, None, None, *self._geometry())
+        ke, se, pw, wi, we, wd, wv, er = summed
+        e0 = getattr(self, "initial_energy", ke + wi + wd + wv + er)   # at construction: this very state
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
+                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
+                "removed_energy": er, "total": ke + wi + wd + wv + er,
+                "numerical_loss": numerical_loss(e0, we, ke, se, pw, wd, viscous=wv, removed=er)}
         point = self.loads.point_forces(p, self.t) if forces else None
         if point is not None:
             idx, load_id, load_w, load_vec = point
@@ -316,11 +346,11 @@ class Solver:
             self.supports.project(self, target)
 
     def grid_to_particles(self, remap):
-        """Step 9 / eq. 5: particle velocities (FLIP/PIC); MUSL also re-maps their momenta."""
+        """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
+        also re-maps their momenta."""
         p = self.particles
         self._dx = self._scratch("_dx_buf", (p.n, 2))
-        vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
-                                   *self._geometry(), remap, self._dx, self._dt_step)
+        vmax, bad = self.transfer.g2p(self, remap)
         self._vmax_local, self._bad_local = vmax, bad
         if self.supports is not None:
             self.supports.hold_particles(self)
@@ -585,10 +615,6 @@ class Solver:
         (by a reduction shared with other figures), else summed here (collective)."""
         if summed is None:
             summed = self.decomp.allreduce_sum(self.local_energies())
-        ke, se, pw, wi, we, wd, wv, er = summed
-        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
-                "removed_energy": er, "total": ke + wi + wd + wv + er}
 
     def local_energies(self):
         """This rank's shares of the energies, in the order ``energies`` reads them."""

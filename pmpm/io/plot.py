@@ -18,6 +18,13 @@ energy held by the body (kinetic + internal) or of the external work, so 0.01 me
 Every axis is labelled with its quantity and SI unit (read from the file's ``units``
 attributes, see :mod:`pmpm.io.schema`), and legends sit outside the axes, to the right,
 so they never cover a curve.
+
+Numerical loss
+--------------
+A file with a ``numerical_loss`` column (J: initial energy + external work - kinetic -
+strain energy - plastic work - damping work, :func:`pmpm.core.solver.numerical_loss`) gets
+it drawn dashed black among the energies, and below, beside the balance error, as a
+fraction of the energy put in (:func:`numerical_loss_fraction`).
 """
 
 from __future__ import annotations
@@ -33,7 +40,8 @@ from pmpm.io import ownership
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
 from pmpm.scene.names import energies_png, history_png
 
-__all__ = ["plot_results", "plot_deformed", "energy_balance_error", "scene_stem"]
+__all__ = ["plot_results", "plot_deformed", "energy_balance_error", "energy_figure",
+           "numerical_loss_fraction", "scene_stem"]
 
 logger = logging.getLogger(__name__)
 
@@ -147,13 +155,29 @@ def _plot_track(track, runs, outdir, stem):
     return path
 
 
-def _plot_energies(label, energies, outdir, run):
-    """Draw the energy columns and the balance error of one run (``run``: its file's stem)."""
+def energy_figure(label, energies):
+    """The energies figure of one run: every energy column against time (the numerical loss
+    dashed black, ``numerical loss (J)``), and below the relative balance error and the
+    numerical loss as a fraction of the energy put in (initial energy plus external work).
+
+    Parameters
+    ----------
+    label : str
+        The run's name in the title.
+    energies : dict of str to numpy.ndarray
+        Energy columns (as from :func:`pmpm.io.read_energies`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     time = energies["time"]
     fig = _new_figure(figsize=(8, 6), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for name, values in energies.items():
-        if name != "time":
+        if name == "numerical_loss":
+            top.plot(time, values, "k--", label=_axis("numerical loss", "J"))
+        elif name != "time":
             top.plot(time, values, label=name)
     top.set_ylabel(_axis("energy", "J"))
     top.set_title(f"energies: {label}")
@@ -161,10 +185,38 @@ def _plot_energies(label, energies, outdir, run):
     top.grid(True, alpha=0.3)
     error = energy_balance_error(energies)
     if error is not None:
-        bottom.plot(time, error, color="k")
-    bottom.set_ylabel(_axis("relative balance error", "1"))
+        bottom.plot(time, error, color="k", label="balance error")
+    share = numerical_loss_fraction(energies)
+    if share is not None:
+        bottom.plot(time, share, "r--", label="numerical loss / energy put in")
+    bottom.set_ylabel(_axis("relative to the energy in play", "1"))
     bottom.set_xlabel(_axis("time", "s"))
     bottom.grid(True, alpha=0.3)
+    _legend(bottom)
+    return fig
+
+
+def numerical_loss_fraction(energies):
+    """The ``numerical_loss`` column over the energy put in so far (initial energy plus external
+    work, which by the loss's definition is the sum of the held, dissipated and lost terms);
+    NaN where nothing was put in yet, None without the column.
+
+    Parameters
+    ----------
+    energies : dict of str to numpy.ndarray
+    """
+    if "numerical_loss" not in energies:
+        return None
+    c = {k: np.asarray(v, dtype=float) for k, v in energies.items()}
+    zero = np.zeros(len(c["numerical_loss"]))
+    supplied = sum(c.get(k, zero) for k in dict.fromkeys(STORED + LEFT)) + c["numerical_loss"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(supplied > 0, c["numerical_loss"] / supplied, np.nan)
+
+
+def _plot_energies(label, energies, outdir, run):
+    """Draw :func:`energy_figure` of one run into ``<run>_energies.png``."""
+    fig = energy_figure(label, energies)
     path = ownership.claim(os.path.join(outdir, energies_png(_safe(run))))
     fig.savefig(path, dpi=110)
     return path

@@ -68,6 +68,9 @@ ENERGIES = {
     "external_work": ("J", "work of loads, boundary motion and ground motion"),
     "total": ("J", "kinetic + internal_work + damping_work + viscous_damping_work + removed_energy; equals external_work plus the "
                    "initial kinetic energy when the run conserves energy"),
+    "numerical_loss": ("J", "energy lost to the discretisation (numerical damping): initial energy "
+                            "+ external_work - kinetic - strain_energy - plastic_work - damping_work; "
+                            "positive is lost, negative gained"),
 }
 
 

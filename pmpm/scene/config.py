@@ -102,6 +102,8 @@ class SolverConfig:
     interpolation: str = "point"   # or a domain interpolation: "ugimp", "cpgimp", "cpdi" (pmpm.core.shape)
     max_estimated_steps: int = 10_000_000
     allow_unstable_time_step: bool = False
+    transfer: str = "flip"   # particle <-> grid velocity transfer: "flip" (with pic_blend), "apic", "xpic"
+    xpic_order: int = 2      # m of XPIC(m) (1: PIC)
 
 
 @dataclass(frozen=True)
@@ -539,6 +541,8 @@ def _damping(t):
 
 #: objective stress rates of the hypoelastic models (pmpm.core.kernels.objective)
 OBJECTIVE_RATES = ("jaumann", "green_naghdi")
+#: velocity transfers (pmpm.core.transfers): FLIP (the paper's, with the PIC blend), APIC, XPIC(m)
+TRANSFERS = ("flip", "apic", "xpic")
 
 
 def _solver(t):
@@ -564,7 +568,26 @@ def _solver(t):
         objective_rate=rate,
         interpolation=t.string("interpolation", "point", choices=INTERPOLATIONS),
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
-        allow_unstable_time_step=t.boolean("allow_unstable_time_step", False))
+        allow_unstable_time_step=t.boolean("allow_unstable_time_step", False),
+        transfer=t.string("transfer", "flip", choices=TRANSFERS),
+        xpic_order=t.integer("xpic_order", 2, low=1))
+    if t.has("xpic_order") and s.transfer != "xpic":
+        raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
+    if s.transfer == "xpic":
+        if s.interpolation != "point":
+            raise ConfigError(t.path("transfer"), f"xpic is defined for point particles, not "
+                                                  f"interpolation = {s.interpolation!r}")
+        if s.pic_blend:
+            raise ConfigError(t.path("pic_blend"), "is FLIP's; xpic updates the velocity from the grid alone")
+    if s.transfer == "apic":
+        if s.shape_function == "linear":
+            raise ConfigError(t.path("transfer"), "apic needs quadratic or cubic B-splines (with linear "
+                                                  "ones a particle on a node sees no affine field)")
+        if s.interpolation != "point":
+            raise ConfigError(t.path("transfer"), f"apic is defined for point particles, not "
+                                                  f"interpolation = {s.interpolation!r}")
+        if s.pic_blend:
+            raise ConfigError(t.path("pic_blend"), "is FLIP's; apic updates the velocity from the grid alone")
     if s.interpolation in GIMP_INTERPOLATIONS and s.shape_function not in GIMP_SHAPES:
         raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "
                                                    f"{' or '.join(map(repr, GIMP_SHAPES))}, not {s.shape_function!r}")
@@ -729,6 +752,8 @@ def parse_scene(data, path="<scene>"):
     for k, bc in enumerate(scene.boundaries):
         if bc.body is not None and bc.body not in names:
             raise ConfigError(f"boundary[{k}].body", f"no body named {bc.body!r} (defined: {', '.join(names)})")
+    if scene.contact is not None and solver.transfer != "flip":
+        raise ConfigError("solver.transfer", "the contact solver's kernels are FLIP's")
     if scene.contact is not None and solver.interpolation != "point":
         raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
     _check_hysteresis(scene)

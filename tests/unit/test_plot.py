@@ -116,4 +116,4 @@ def test_axes_have_units_and_legends_cover_no_curve(tmp_path, figures):
                 # the legend lies right of the axes, so it overlaps no curve drawn inside them
                 assert box.x0 >= area.x1, (box, area)
         assert any(ax.get_xlabel() for ax in fig.axes)
-    assert legends == 4  # two history plots, two energy plots
+    assert legends == 6  # two history plots, two energy plots (energies; balance error and loss)

@@ -1,0 +1,190 @@
+"""APIC transfers of point particles (Jiang, Schroeder, Selle, Teran & Stomakhin 2015): each
+particle carries, beside its velocity v_p, an affine velocity C_p (the 2 x 2 matrix
+B_p D_p^-1 of the paper, 1/s), so the grid sees the velocity field v_p + C_p (x - x_p) around
+it instead of a constant:
+
+    p2g   (m v)_i = sum_p w_ip m_p (v_p + C_p (x_i - x_p))
+    g2p   v_p = sum_i w_ip v_i,   B_p = sum_i w_ip v_i (x_i - x_p)^T,   C_p = B_p D_p^-1,
+          D_p = sum_i w_ip (x_i - x_p)(x_i - x_p)^T
+
+D_p is summed from the particle's own weights rather than taken as h^2/3 I (cubic) or h^2/4 I
+(quadratic): the two agree inside the grid, and the sum stays exact next to the edges, where the
+boundary-modified B-splines (pmpm/core/shape.py) change the weights; the conservation of angular
+momentum rests on D_p being that sum. The weights are tensor products, so
+D_xx = sum_a wx_a dx_a^2, D_yy = sum_b wy_b dy_b^2 and D_xy = (sum_a wx_a dx_a)(sum_b wy_b dy_b).
+
+The velocity update is PIC's (no FLIP increment): APIC keeps the affine part of the field a
+particle sees, which PIC loses every step, and none of FLIP's null-space noise. The MUSL re-map
+scatters the new m_p (v_p + C_p (x_i - x_p)), and the strain increment is the point kernel's
+(pmpm.core.kernels.transfer.g2p_kinematics).
+
+Point particles only (the CPDI and GIMP kernels are transfer.py's); linear B-splines are
+refused by the scene (their D_p vanishes when a particle sits on a node).
+"""
+import numba as nb
+
+from pmpm.core.kernels.transfer import _block_weights, _buffers, _external_force
+from pmpm.core.shape import BLOCK, stencil
+
+__all__ = ["p2g_affine", "g2p_affine", "D_FLOOR"]
+
+#: det D_p (cells^4) below which a particle keeps no affine velocity: D_p vanishes on a grid edge
+#: (1e-12: D_xx ~ s^2 within s cells of the edge, so particles closer than ~1e-6 cells)
+D_FLOOR = 1e-12
+
+
+@nb.njit(cache=True)
+def p2g_affine(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
+               G, ox, oy, origin, inv_h, ncx, ncy, shape):
+    """Scatter mass, the APIC momentum m (v + C (x_i - x_p)) (``C`` (N, 4): Cxx, Cxy, Cyx, Cyy
+    in 1/s), the internal force (``stress`` not None) and the external force into ``G``, as
+    pmpm.core.kernels.transfer.p2g with ``v`` given."""
+    with_force = stress is not None or gravity is not None or load_id is not None
+    K = stencil(shape)
+    S, I0, J0, WX, WY = _buffers(shape)
+    h = 1.0 / inv_h
+    n = x.shape[0]
+    for p0 in range(0, n, BLOCK):
+        nq = min(BLOCK, n - p0)
+        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+        for q in range(nq):
+            p = p0 + q
+            mp = m[p]
+            sx = (x[p, 0] - origin[0]) * inv_h
+            sy = (x[p, 1] - origin[1]) * inv_h
+            mvx = mp * v[p, 0]
+            mvy = mp * v[p, 1]
+            # m C in momentum per metre of offset
+            cxx = mp * C[p, 0] * h
+            cxy = mp * C[p, 1] * h
+            cyx = mp * C[p, 2] * h
+            cyy = mp * C[p, 3] * h
+            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+            if stress is not None:
+                c = -vol[p] * inv_h
+                sxx = c * stress[p, 0]
+                syy = c * stress[p, 1]
+                sxy = c * stress[p, 2]
+            for a in range(K):
+                ii = I0[q] + a - ox
+                wa = WX[a, q]
+                ga = WX[K + a, q]
+                ddx = I0[q] + a - sx           # x_i - x_p in cells
+                for b in range(K):
+                    jj = J0[q] + b - oy
+                    wb = WY[b, q]
+                    w = wa * wb
+                    ddy = J0[q] + b - sy
+                    G[ii, jj, 0] += w * mp
+                    G[ii, jj, 1] += w * (mvx + cxx * ddx + cxy * ddy)
+                    G[ii, jj, 2] += w * (mvy + cyx * ddx + cyy * ddy)
+                    if with_force:
+                        fnx = w * fx
+                        fny = w * fy
+                        if stress is not None:
+                            dnx = ga * wb
+                            dny = wa * WY[K + b, q]
+                            fnx += sxx * dnx + sxy * dny
+                            fny += sxy * dnx + syy * dny
+                        G[ii, jj, 3] += fnx
+                        G[ii, jj, 4] += fny
+
+
+@nb.njit(cache=True)
+def g2p_affine(x, m, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
+    """APIC velocity update from the grid velocities in fields 1, 2: v_p = sum w v_i and
+    C_p = B_p D_p^-1 (1/s, into ``C``); ``dx`` receives dt v_p (the move, eq. 5); with
+    ``remap`` the new APIC momenta go into fields 5, 6 (MUSL). Returns the largest particle
+    speed and the number of particles whose new velocity or affine matrix is not finite."""
+    vmax2 = 0.0
+    bad = 0
+    K = stencil(shape)
+    S, I0, J0, WX, WY = _buffers(shape)
+    h = 1.0 / inv_h
+    n = x.shape[0]
+    for p0 in range(0, n, BLOCK):
+        nq = min(BLOCK, n - p0)
+        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+        for q in range(nq):
+            p = p0 + q
+            sx = (x[p, 0] - origin[0]) * inv_h
+            sy = (x[p, 1] - origin[1]) * inv_h
+            # D from the 1-D weights (partition of unity along each axis)
+            mx = 0.0
+            dxx = 0.0
+            for a in range(K):
+                d = I0[q] + a - sx
+                mx += WX[a, q] * d
+                dxx += WX[a, q] * d * d
+            my = 0.0
+            dyy = 0.0
+            for b in range(K):
+                d = J0[q] + b - sy
+                my += WY[b, q] * d
+                dyy += WY[b, q] * d * d
+            dxy = mx * my
+            vx = 0.0
+            vy = 0.0
+            bxx = 0.0
+            bxy = 0.0
+            byx = 0.0
+            byy = 0.0
+            for a in range(K):
+                ii = I0[q] + a - ox
+                wa = WX[a, q]
+                ddx = I0[q] + a - sx
+                for b in range(K):
+                    jj = J0[q] + b - oy
+                    w = wa * WY[b, q]
+                    ddy = J0[q] + b - sy
+                    gvx = w * G[ii, jj, 1]
+                    gvy = w * G[ii, jj, 2]
+                    vx += gvx
+                    vy += gvy
+                    bxx += gvx * ddx
+                    bxy += gvx * ddy
+                    byx += gvy * ddx
+                    byy += gvy * ddy
+            # C = B D^-1 (cells), then per metre; D is symmetric positive definite except for a
+            # particle on the grid's edge, whose edge node takes all its weight along that axis
+            # (D_xx or D_yy = 0): it sees no affine field and keeps none (PIC there)
+            det = dxx * dyy - dxy * dxy
+            r = inv_h / det if det > D_FLOOR else 0.0
+            cxx = (bxx * dyy - bxy * dxy) * r
+            cxy = (bxy * dxx - bxx * dxy) * r
+            cyx = (byx * dyy - byy * dxy) * r
+            cyy = (byy * dxx - byx * dxy) * r
+            C[p, 0] = cxx
+            C[p, 1] = cxy
+            C[p, 2] = cyx
+            C[p, 3] = cyy
+            dx[p, 0] = dt * vx
+            dx[p, 1] = dt * vy
+            v[p, 0] = vx
+            v[p, 1] = vy
+            speed2 = vx * vx + vy * vy
+            if speed2 > vmax2:
+                vmax2 = speed2
+            elif not speed2 < 1e300:  # NaN or inf
+                bad += 1
+            if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
+                bad += 1
+            if remap:
+                mp = m[p]
+                mvx = mp * vx
+                mvy = mp * vy
+                kxx = mp * cxx * h
+                kxy = mp * cxy * h
+                kyx = mp * cyx * h
+                kyy = mp * cyy * h
+                for a in range(K):
+                    ii = I0[q] + a - ox
+                    wa = WX[a, q]
+                    ddx = I0[q] + a - sx
+                    for b in range(K):
+                        jj = J0[q] + b - oy
+                        w = wa * WY[b, q]
+                        ddy = J0[q] + b - sy
+                        G[ii, jj, 5] += w * (mvx + kxx * ddx + kxy * ddy)
+                        G[ii, jj, 6] += w * (mvy + kyx * ddx + kyy * ddy)
+    return vmax2 ** 0.5, bad

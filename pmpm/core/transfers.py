@@ -1,0 +1,133 @@
+"""Particle <-> grid velocity transfers as strategies (``solver.transfer``).
+
+A transfer owns the two phases that move velocity between the particles and the grid: the
+momentum part of particles-to-grid, and grid-to-particles (the velocity update, the move and
+the MUSL re-map). The scheme (pmpm.core.schemes) orders the phases; the transfer says how each
+carries velocity.
+
+* ``flip``: the paper's FLIP with an optional PIC blend (pmpm.core.kernels.transfer).
+* ``apic``: affine PIC (pmpm.core.kernels.affine); each particle keeps an affine velocity ``C``
+  (4 numbers), a field that exists only in runs that name this transfer.
+* ``xpic``: XPIC(m) (pmpm.core.kernels.xpic), order ``solver.xpic_order``; no particle field,
+  m - 1 extra particle passes and halo exchanges per step.
+"""
+from math import comb
+
+import numpy as np
+
+from pmpm.core import kernels as K
+from pmpm.core.kernels.affine import g2p_affine, p2g_affine
+from pmpm.core.kernels.xpic import grid_particle_grid
+from pmpm.registry import lookup
+
+__all__ = ["Transfer", "FLIP", "APIC", "XPIC", "make_transfer", "xpic_coefficients"]
+
+
+class Transfer:
+    """Base of the transfers: ``p2g(solver, momentum, forces)`` and ``g2p(solver, remap)``."""
+
+    name = None
+    #: per-particle fields the transfer keeps: name -> trailing shape
+    fields = {}
+
+    def p2g(self, s, momentum, forces):
+        raise NotImplementedError
+
+    def g2p(self, s, remap):
+        raise NotImplementedError
+
+
+class FLIP(Transfer):
+    """FLIP with the scene's PIC blend (paper eq. 5)."""
+
+    name = "flip"
+
+    def p2g(self, s, momentum, forces):
+        p = s.particles
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
+              s.loads.gravity if forces else None, None, None, None, *s._geometry())
+
+    def g2p(self, s, remap):
+        p = s.particles
+        return K.g2p_velocity(p["x"], p["m"], p["v"], s.scene.solver.pic_blend, *s._geometry(),
+                              remap, s._dx, s._dt_step)
+
+
+class APIC(Transfer):
+    """Affine PIC (Jiang et al. 2015): momentum m (v + C (x_i - x_p)), C = B D^-1."""
+
+    name = "apic"
+    fields = {"C": (4,)}
+
+    def p2g(self, s, momentum, forces):
+        p = s.particles
+        if not momentum:   # USF's force pass: no velocity moves
+            return FLIP.p2g(self, s, False, forces)
+        p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"] if forces else None,
+                   s.loads.gravity if forces else None, None, None, None, *s._geometry())
+
+    def g2p(self, s, remap):
+        p = s.particles
+        return g2p_affine(p["x"], p["m"], p["v"], p["C"], *s._geometry(), remap, s._dx, s._dt_step)
+
+
+def xpic_coefficients(order):
+    """(-1)^(k+1) C(m, k) for k = 1 .. m: v* = sum_k c_k M^(k-1) v^n (they sum to 1)."""
+    return [(-1) ** (k + 1) * comb(order, k) for k in range(1, order + 1)]
+
+
+class XPIC(Transfer):
+    """XPIC(m) (Hammerquist & Nairn 2017): v_p = S_p (v^L - v^n + v*), see pmpm.core.kernels.xpic.
+
+    The boundary values hold in v^n and in every M^k v^n, so v* takes them too (its
+    coefficients sum to 1) and a particle at a fixed node gets the node's velocity, as with
+    PIC; m = 1 is PIC exactly. The particle update goes through the FLIP kernel: with the
+    particle velocities zeroed and the velocity-change fields set to v^L - v^n + v*, its
+    ``v + sum S dv`` is the XPIC velocity, its move dt sum S v^L and its re-map those of FLIP."""
+
+    name = "xpic"
+
+    def __init__(self, order=2):
+        self.order = order
+        self.coefficients = xpic_coefficients(order)
+
+    def p2g(self, s, momentum, forces):
+        FLIP.p2g(self, s, momentum, forces)
+
+    def _apply_bc(self, w, u):
+        mask = w.bc_mask.astype(bool)
+        u[mask] = w.bc_vel[mask]
+        return u
+
+    def smooth(self, s, u):
+        """M u = S^+ S u with the boundary values (collective: one halo round)."""
+        w, p = s.window, s.particles
+        out = np.zeros_like(u)
+        G, ox, oy, origin, inv_h, ncx, ncy, shape = s._geometry()
+        grid_particle_grid(p["x"], p["m"], u, out, ox, oy, origin, inv_h, ncx, ncy, shape)
+        s.decomp.sum_halo(out)
+        mass = w.G[..., 0:1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.where(mass > 0.0, out / np.where(mass > 0.0, mass, 1.0), 0.0)
+        return self._apply_bc(w, out)
+
+    def g2p(self, s, remap):
+        w, p = s.window, s.particles
+        G = w.G
+        v_new = G[..., 1:3]
+        vn = self._apply_bc(w, v_new - G[..., 3:5])   # start-of-step velocity with the BCs
+        u = vn
+        vstar = self.coefficients[0] * u
+        for c in self.coefficients[1:]:
+            u = self.smooth(s, u)
+            vstar += c * u
+        G[..., 3:5] = v_new - vn + vstar
+        p["v"][...] = 0.0
+        return K.g2p_velocity(p["x"], p["m"], p["v"], 0.0, *s._geometry(), remap, s._dx, s._dt_step)
+
+
+def make_transfer(name, **options):
+    """The transfer registered under ``name`` (``flip``, ``apic``, ``xpic``); ``options``: the
+    XPIC order (``order``)."""
+    cls = lookup(Transfer, name)
+    return cls(**options) if options else cls()
