@@ -297,12 +297,7 @@ class Solver:
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
         p = self.particles
-        ke, se, pw, wi, we, wd, wv, er = summed
-        e0 = getattr(self, "initial_energy", ke + wi + wd + wv + er)   # at construction: this very state
-        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
-                "removed_energy": er, "total": ke + wi + wd + wv + er,
-                "numerical_loss": numerical_loss(e0, we, ke, se, pw, wd, viscous=wv, removed=er)}
+        self.transfer.p2g(self, momentum, forces)
         point = self.loads.point_forces(p, self.t) if forces else None
         if point is not None:
             idx, load_id, load_w, load_vec = point
@@ -615,6 +610,12 @@ class Solver:
         (by a reduction shared with other figures), else summed here (collective)."""
         if summed is None:
             summed = self.decomp.allreduce_sum(self.local_energies())
+        ke, se, pw, wi, we, wd, wv, er = summed
+        e0 = getattr(self, "initial_energy", ke + wi + wd + wv + er)   # at construction: this very state
+        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
+                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
+                "removed_energy": er, "total": ke + wi + wd + wv + er,
+                "numerical_loss": numerical_loss(e0, we, ke, se, pw, wd, viscous=wv, removed=er)}
 
     def local_energies(self):
         """This rank's shares of the energies, in the order ``energies`` reads them."""

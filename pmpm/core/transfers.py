@@ -44,7 +44,7 @@ class FLIP(Transfer):
 
     def p2g(self, s, momentum, forces):
         p = s.particles
-        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], p["stress"] if forces else None,
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], s.force_stress() if forces else None,
               s.loads.gravity if forces else None, None, None, None, *s._geometry())
 
     def g2p(self, s, remap):
@@ -63,7 +63,7 @@ class APIC(Transfer):
         p = s.particles
         if not momentum:   # USF's force pass: no velocity moves
             return FLIP.p2g(self, s, False, forces)
-        p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"] if forces else None,
+        p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], s.force_stress() if forces else None,
                    s.loads.gravity if forces else None, None, None, None, *s._geometry())
 
     def g2p(self, s, remap):
