@@ -90,8 +90,8 @@ def _complete_step(path):
         with h5py.File(path, "r") as f:
             if bool(f.attrs.get("complete", False)) and "particles/id" in f:
                 return int(f.attrs["step"])
-    except (OSError, KeyError, ValueError) as exc:
-        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError) as exc:  # RuntimeError: HDF5
+        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)  # (a link loop, a bad node)
     return None
 
 

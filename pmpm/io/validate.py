@@ -166,8 +166,10 @@ def _columns(attrs, where):
     cols = attrs.get("columns")
     if cols is None:
         return None
+    if not isinstance(cols, np.ndarray) or cols.ndim != 1:
+        raise ValueError(f"{where} attribute 'columns' is not a list of names")
     try:
-        out = [_text(c) for c in np.asarray(cols).reshape(-1)]
+        out = [_text(c) for c in cols]
     except (TypeError, ValueError):
         raise ValueError(f"{where} attribute 'columns' is not a list of names") from None
     if not all(isinstance(c, str) for c in out):
@@ -177,6 +179,7 @@ def _columns(attrs, where):
 
 def _series(group, where):
     """A group of equal-length 1-D numeric columns, one of them ``time``."""
+    _columns(group.attrs, where)
     lengths = set()
     for name in group:
         d = _dataset(group, name, where)

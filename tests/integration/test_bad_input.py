@@ -222,6 +222,28 @@ CASES = {
     "scene-nul-bytes": (lambda t: b"\0" * 64, {}, ["--check"], 2, "case.toml: not valid TOML"),
     "scene-huge": (lambda t: t + "#" * (2 << 20), {}, ["--check"], 2, "not a scene file"),
     "scene-name-space": ("rename:my case.toml", {}, ["--check"], 2, "may hold only"),
+    # 7b. numbers that would overflow the set-up or the first step, strings that would break the
+    # one line (issue 19): refused when the scene is read
+    "circle-radius-1e308": (body('shape = "circle"\ncenter = [3.0, 1.0]\nradius = 1e308'), {}, ["--check"], 2,
+                            "bodies[1].radius: must be at most 1e+100 in magnitude"),
+    "velocity-1e308": (sub("velocity = [0.1, 0.0]", "velocity = [1e308, 0.0]"), {}, ["--check"], 2,
+                       "bodies[0].velocity: must be at most 1e+100"),
+    "velocity-1e308-run": (sub("velocity = [0.1, 0.0]", "velocity = [-1e308, 0.0]"), {}, [], 2,
+                           "bodies[0].velocity: must be at most 1e+100"),
+    "gravity-1e308": (add("[loads]\ngravity = [0.0, -1e308]"), {}, ["--check"], 2,
+                      "loads.gravity: every entry must be at most 1e+100"),
+    "force-1e200": (add('[[loads.forces]]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\nforce = [1e200, 0.0]'), {},
+                    ["--check"], 2, "loads.forces[0].force: every entry must be at most 1e+100"),
+    "ground-scale-1e308": (lambda t: ground("rec.txt")(t) + "scale = 1e308\n", {"rec.txt": "0.0 0.1\n0.02 0.0\n"},
+                           ["--check"], 2, "loads.ground_motion.scale: must be at most 1e+100"),
+    "title-nul": (top('title = "a\\u0000b"'), {}, [], 2, "case.toml: title: holds the control character '\\x00'"),
+    "title-newline": (top('title = "a\\nb"'), {}, ["--check"], 2, "title: holds the control character '\\n'"),
+    "key-ansi-escape": (sub("[solver]\n", '[solver]\n"\\u001b[31mred" = 1\n'), {}, ["--check"], 2,
+                        "case.toml: solver.\\x1b[31mred: unknown key"),
+    "key-newline": (sub("[solver]\n", '[solver]\n"a\\nb" = 1\n'), {}, ["--check"], 2, "solver.a\\nb: unknown key"),
+    "output-directory-proc": (add('[output]\ndirectory = "/proc/pmpm_out"'), {}, [], 2,
+                              "output.directory: '/proc/pmpm_out' lies in /proc"),
+    "output-directory-sys": (add('[output]\ndirectory = "/sys/kernel/pmpm"'), {}, ["--check"], 2, "lies in /sys"),
     # 8. combinations pmpm does not support: CPDI's corners in the contact solver's kernels
     "cpdi-with-contact": (lambda t: sub("end_time = 0.01", 'end_time = 0.01\ninterpolation = "cpdi"')(t)
                           + "\n[contact]\nfriction = 0.0\n", {}, ["--check"], 2,
@@ -304,7 +326,7 @@ def test_bad_input_keeps_the_promise(tmp_path, name, ranks):
 
 def test_scene_from_dev_zero_and_a_directory(tmp_path):
     for target, expected in (("/dev/zero", "/dev/zero: is not a regular file"),
-                             (str(tmp_path), "cannot read")):
+                             (str(tmp_path), "is not a regular file (a folder)")):
         before = _tree(tmp_path)
         assert_promise(run_cli(tmp_path, target, "--check"), 2, expected)
         assert _tree(tmp_path) == before
@@ -371,6 +393,31 @@ def _drop_record(attrs):
     del attrs["scene_record"]
 
 
+def _positions_3_columns(f):
+    x = f["particles/x"][()]
+    del f["particles/x"]
+    f["particles/x"] = np.concatenate([x, np.zeros((len(x), 1))], axis=1)
+
+
+def _count_lowered(f):
+    """The root particle count lowered by 5 (the arrays and the JSON record keep theirs)."""
+    f.attrs["n_total"] = int(f.attrs["n_total"]) - 5
+
+
+def _soft_link(f):
+    del f["particles/v"]
+    f["particles/v"] = h5py.SoftLink("/particles/v")  # a loop
+
+
+def _external_link(f):
+    del f["particles/v"]
+    f["particles/v"] = h5py.ExternalLink("/etc/passwd", "/v")
+
+
+def _time_as_text(f):
+    f.attrs["time"] = "soon"
+
+
 RESTARTS = {
     # scene edit, checkpoint edit, --restart target, expected
     "other-material": (sub("E = 100.0", "E = 200.0"), None, "case_results/case.h5",
@@ -389,6 +436,14 @@ RESTARTS = {
                        "particle ids"),
     "missing-checkpoint": (None, None, "nowhere/case.h5", "cannot restart"),
     "garbage-checkpoint": (None, ("garbage", None), "case_results/case.h5", "cannot restart"),
+    # issue 19: a checkpoint's layout checked before it is used
+    "positions-3-columns": (None, ("h5", _positions_3_columns), "case_results/case.h5",
+                            "/particles/x has shape (32, 3), expected (32, 2)"),
+    "particle-count-lowered": (None, ("h5", _count_lowered), "case_results/case.h5",
+                               "counts of particle ids disagree"),
+    "soft-link-loop": (None, ("h5", _soft_link), "case_results/case.h5", "/particles/v is a soft link"),
+    "external-link": (None, ("h5", _external_link), "case_results/case.h5", "/particles/v is an external link"),
+    "time-as-text": (None, ("h5", _time_as_text), "case_results/case.h5", "'time' is missing or not a number"),
 }
 
 
@@ -408,6 +463,9 @@ def test_restart_refuses_foreign_and_crafted_checkpoints(tmp_path, finished_run,
             path = work / "case_results" / f"case.ckpt{k}.h5"
             if kind == "garbage":
                 path.write_bytes(b"not an HDF5 file")
+            elif kind == "h5":
+                with h5py.File(path, "r+") as f:
+                    fn(f)
             elif kind == "attrs":
                 _craft(path, edit_attrs=fn)
             else:
@@ -604,3 +662,135 @@ def test_own_files_are_rewritten_and_two_scenes_share_a_folder(tmp_path, tracked
     with open(work / "case_results" / "pmpm-files.json") as fh:
         owners = {n: e["owner"] for n, e in json.load(fh)["files"].items()}
     assert owners["case_history_tip.csv"] == "case" and owners["other_history_tip.csv"] == "other"
+
+
+# -- files read: FIFOs, broken results files, the API's arguments (issue 19) ---------------------
+@pytest.mark.parametrize("which", ["scene", "record"])
+def test_a_fifo_is_refused_not_waited_on(tmp_path, which):
+    """A FIFO as the scene file or as the ground-motion record: opened non-blocking and refused
+    (it once blocked forever: the timeout fails the case)."""
+    os.mkfifo(tmp_path / "pipe")
+    if which == "scene":
+        args, expected = ["pipe", "--check"], "pipe: is not a regular file (a FIFO)"
+    else:
+        (tmp_path / "case.toml").write_text(ground("pipe")(BASE))
+        args, expected = ["case.toml"], "pipe: not a valid"
+    before = _tree(tmp_path / "..") if False else None
+    line = assert_promise(run_cli(tmp_path, *args, timeout=TIMEOUT), 2, expected)
+    assert "FIFO" in line
+    assert sorted(os.listdir(tmp_path)) == sorted(["pipe"] + (["case.toml"] if which == "record" else []))
+    del before
+
+
+def test_a_10000_vertex_polygon_is_checked_in_bounded_memory():
+    """The crossing check of a 10,000-vertex polygon (the largest allowed) once took 763 MB at
+    --check; in blocks of pairs it stays under 100 MB (tracemalloc sees numpy's allocations)."""
+    import math
+    import tracemalloc
+    from pmpm.scene.config import _polygon_vertices
+    from pmpm.scene.tables import Table
+    n = 10000
+    verts = [[math.cos(2 * math.pi * k / n), math.sin(2 * math.pi * k / n)] for k in range(n)]
+    tracemalloc.start()
+    try:
+        _polygon_vertices(Table({"vertices": verts}, "bodies[0]"))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 100e6, peak
+    bad = verts[:]
+    bad[10], bad[5000] = bad[5000], bad[10]  # two far vertices swapped: edges cross
+    from pmpm.errors import ConfigError
+    with pytest.raises(ConfigError, match="cross"):
+        _polygon_vertices(Table({"vertices": bad}, "bodies[0]"))
+
+
+def _h5_edit(edit):
+    def apply(path):
+        with h5py.File(path, "r+") as f:
+            edit(f)
+    return apply
+
+
+def _replace(name, data):
+    def edit(f):
+        del f[name]
+        f[name] = data
+    return edit
+
+
+def _link(name, link):
+    def edit(f):
+        del f[name]
+        f[name] = link
+    return edit
+
+
+#: results-file mutation, the line must contain
+BROKEN_RESULTS = {
+    "external-link": (_link("frames/v", h5py.ExternalLink("/etc/passwd", "/x")), "/frames/v is an external link"),
+    "soft-link-loop": (_link("frames/v", h5py.SoftLink("/frames/v")), "/frames/v is a soft link"),
+    "positions-as-strings": (lambda f: _replace("frames/x", np.full(f["frames/x"].shape[:2], b"x"))(f),
+                             "/frames/x holds |S1 values"),
+    "history-1d": (lambda f: _replace("history/tip", f["history/tip"][:, 0])(f), "/history/tip has shape"),
+    "no-n-total": (lambda f: f.attrs.__delitem__("n_total"), "'n_total' is missing"),
+    "step-count": (lambda f: _replace("frames/step", np.arange(1))(f), "/frames/step has shape (1,)"),
+}
+
+
+@pytest.fixture(scope="module")
+def tracked_results(tracked_run):
+    return tracked_run
+
+
+@pytest.mark.parametrize("command", ["plot", "export", "xdmf"])
+@pytest.mark.parametrize("name", list(BROKEN_RESULTS))
+def test_broken_results_files_are_refused_by_plot_and_export(tmp_path, tracked_results, name, command):
+    work = _copy_run(tracked_results, tmp_path / "w")
+    import shutil
+    shutil.rmtree(work / "case_results" / "case_vtu")
+    edit, expected = BROKEN_RESULTS[name]
+    _h5_edit(edit)(work / "case_results" / "case.h5")
+    args = {"plot": ["plot", "case_results/case.h5", "-o", "plots"], "export": ["export", "case_results/case.h5"],
+            "xdmf": ["export", "case_results/case.h5", "--format", "xdmf", "-o", "xd"]}[command]
+    before = _tree(tmp_path)
+    line = assert_promise(run_cli(work, *args), 2, "case_results/case.h5: ")
+    assert expected in line, line
+    assert _tree(tmp_path) == before, "a file was written (a partial export or plot?)"
+
+
+def test_api_arguments_of_the_wrong_kind_are_one_line(tmp_path, monkeypatch):
+    import pmpm
+    from pmpm.errors import ConfigError
+    (tmp_path / "case.toml").write_text(BASE)
+    monkeypatch.chdir(tmp_path)
+    for kwargs, expected in (({"comm": "world"}, "comm: must be an mpi4py communicator"),
+                             ({"write": "yes"}, "write: must be True or False"),
+                             ({"dataframes": "x"}, "dataframes: must be None"),
+                             ({"progress": 3}, "progress: must be True")):
+        with pytest.raises(ConfigError, match=expected):
+            pmpm.run("case.toml", **kwargs)
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(ConfigError, match="'afile' exists and is not a directory"):
+        pmpm.run("case.toml", write=True, overrides={"output.directory": "afile"})
+    with h5py.File(tmp_path / "part.h5", "w") as f:  # only part of the layout
+        f.attrs["layout"] = "pmpm-results-2"
+        for g in ("frames", "history", "energies"):
+            f.create_group(g)
+    with pytest.raises(ValueError, match="part.h5: not a usable pmpm results file: the root attribute 'n_total'"):
+        pmpm.load_results(tmp_path / "part.h5")
+    assert sorted(os.listdir(tmp_path)) == ["afile", "case.toml", "part.h5"]
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["bench", "throughput", "--particles", "1000000000000000"], "bench throughput: argument --particles: must be at most"),
+    (["bench", "fixedcost", "--work", "inf"], "bench fixedcost: argument --work: must be a finite number"),
+    (["bench", "fixedcost", "--work", "nan"], "argument --work: must be a finite number"),
+    (["case.toml", "--bogus"], "run: unrecognized arguments: --bogus"),
+    (["plot", "x.h5", "--nope"], "plot: unrecognized arguments: --nope"),
+    (["case\nname.toml", "--check"], "case\\nname.toml: cannot read"),
+])
+def test_command_line_errors_are_one_line_naming_the_subcommand(tmp_path, args, expected):
+    before = _tree(tmp_path)
+    assert_promise(run_cli(tmp_path, *args), 2, expected)
+    assert _tree(tmp_path) == before

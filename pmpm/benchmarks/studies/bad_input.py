@@ -448,6 +448,18 @@ _MUST_REFUSE = {"strings", "flatten", "extra_column", "empty", "scalar", "soft_l
                 "soft_link_loop", "external_link", "external_vds"}
 
 
+def _layout_of(path, target):
+    """(link kind, shape, dtype) of one object of an HDF5 file, or an error's name."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as f:
+            link = f.get(target, getlink=True) if target != "/" else None
+            obj = f.get(target) if target != "/" else f
+            return (type(link).__name__, getattr(obj, "shape", None), str(getattr(obj, "dtype", "")))
+    except Exception as exc:  # noqa: BLE001 - a broken file is a layout of its own
+        return type(exc).__name__
+
+
 def check_restart(case, run_dir, root):
     """One broken checkpoint through --restart: what broke, or None."""
     op, target, attr, where, both = case
@@ -456,21 +468,22 @@ def check_restart(case, run_dir, root):
     paths = [os.path.join(work, "case_results", f"case.ckpt{k}.h5") for k in (0, 1)]
     from pmpm.io.checkpoint import latest_checkpoint
     newest = latest_checkpoint(os.path.join(work, "case_results", "case"))
+    layout_before = _layout_of(newest, target)
     try:
         for p in (paths if both else [newest]):
             mutate_h5(p, op, target, attr, where)
     except (KeyError, ValueError, TypeError, OSError):
         return None
+    # what must be refused: the newest checkpoint's particle array changed shape, dtype or kind
+    changed = layout_before != _layout_of(newest, target)
     before = tree(root)
     code, _out, err, exc = cli_in_process(["case.toml", "--restart", "case_results/case.h5",
                                            "--no-plots", "-q"], work)
     after = tree(root)
     broken = promise_broken(code, err, exc, before, after, codes=(0, 2))
-    if broken is None and code == 0 and op in _MUST_REFUSE and target.startswith("/particles/") \
-            and (both or True):
-        # the newest complete checkpoint was broken in its particle arrays: never continue
-        # from it silently (an older intact one may be used only if the broken one is refused
-        # as incomplete, which these mutations never make it)
+    if broken is None and code == 0 and op in _MUST_REFUSE and target.startswith("/particles/") and changed:
+        # the newest complete checkpoint's particle arrays changed their layout: never continue
+        # from it silently
         broken = f"restart accepted a checkpoint whose {target} was mutated ({op})"
     if broken is None and before.get(f"w/case_results/{FOREIGN}") != after.get(f"w/case_results/{FOREIGN}"):
         broken = "the user's file changed"
