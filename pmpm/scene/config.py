@@ -299,14 +299,21 @@ def _polygon_vertices(t):
         return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
                        - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
     n = len(P)
-    # all pairs of edges, a block of first edges at a time: at most ~0.5 million pairs in memory
-    # (all 50 million pairs of a 10,000-vertex polygon at once took 763 MB)
+    # all pairs of edges, a block of first edges at a time (all 50 million pairs of a 10,000-vertex
+    # polygon at once took 763 MB): the edges' bounding boxes are compared by broadcasting, the
+    # orientation test runs only on the pairs whose boxes overlap
+    lo, hi = np.minimum(P, Q), np.maximum(P, Q)
     block = max(1, (1 << 19) // n)
+    cols = np.arange(n)
     for first in range(0, n, block):
-        i, j = np.meshgrid(np.arange(first, min(first + block, n)), np.arange(n), indexing="ij")
-        i, j = i.ravel(), j.ravel()
-        keep = (j >= i + 2) & ~((i == 0) & (j == n - 1))  # adjacent edges share a vertex
-        i, j = i[keep], j[keep]
+        rows = np.arange(first, min(first + block, n))
+        near = cols[None, :] >= rows[:, None] + 2  # adjacent edges share a vertex
+        for d in range(2):
+            near &= (lo[rows, None, d] <= hi[None, :, d]) & (lo[None, :, d] <= hi[rows, None, d])
+        if first == 0:
+            near[0, n - 1] = False  # the first and last edges share a vertex
+        i, j = np.nonzero(near)
+        i = i + first
         a, b, c, d = P[i], Q[i], P[j], Q[j]
         crosses = (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)
         if crosses.any():

@@ -228,22 +228,16 @@ CASES = {
                             "bodies[1].radius: must be at most 1e+100 in magnitude"),
     "velocity-1e308": (sub("velocity = [0.1, 0.0]", "velocity = [1e308, 0.0]"), {}, ["--check"], 2,
                        "bodies[0].velocity: must be at most 1e+100"),
-    "velocity-1e308-run": (sub("velocity = [0.1, 0.0]", "velocity = [-1e308, 0.0]"), {}, [], 2,
-                           "bodies[0].velocity: must be at most 1e+100"),
     "gravity-1e308": (add("[loads]\ngravity = [0.0, -1e308]"), {}, ["--check"], 2,
                       "loads.gravity: every entry must be at most 1e+100"),
-    "force-1e200": (add('[[loads.forces]]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\nforce = [1e200, 0.0]'), {},
-                    ["--check"], 2, "loads.forces[0].force: every entry must be at most 1e+100"),
     "ground-scale-1e308": (lambda t: ground("rec.txt")(t) + "scale = 1e308\n", {"rec.txt": "0.0 0.1\n0.02 0.0\n"},
                            ["--check"], 2, "loads.ground_motion.scale: must be at most 1e+100"),
     "title-nul": (top('title = "a\\u0000b"'), {}, [], 2, "case.toml: title: holds the control character '\\x00'"),
     "title-newline": (top('title = "a\\nb"'), {}, ["--check"], 2, "title: holds the control character '\\n'"),
     "key-ansi-escape": (sub("[solver]\n", '[solver]\n"\\u001b[31mred" = 1\n'), {}, ["--check"], 2,
                         "case.toml: solver.\\x1b[31mred: unknown key"),
-    "key-newline": (sub("[solver]\n", '[solver]\n"a\\nb" = 1\n'), {}, ["--check"], 2, "solver.a\\nb: unknown key"),
     "output-directory-proc": (add('[output]\ndirectory = "/proc/pmpm_out"'), {}, [], 2,
                               "output.directory: '/proc/pmpm_out' lies in /proc"),
-    "output-directory-sys": (add('[output]\ndirectory = "/sys/kernel/pmpm"'), {}, ["--check"], 2, "lies in /sys"),
     # 8. combinations pmpm does not support: CPDI's corners in the contact solver's kernels
     "cpdi-with-contact": (lambda t: sub("end_time = 0.01", 'end_time = 0.01\ninterpolation = "cpdi"')(t)
                           + "\n[contact]\nfriction = 0.0\n", {}, ["--check"], 2,
@@ -272,6 +266,18 @@ def run_cli(cwd, *args, timeout=TIMEOUT, ranks=0):
         cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", "--bind-to", "none"] + cmd
         env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     return subprocess.run(cmd, cwd=cwd, capture_output=True, timeout=timeout, env=env)
+
+
+def run_in_process(cwd, *args):
+    """``pmpm args`` in this process, as :func:`run_cli` reports it (no interpreter start: the
+    cases that need no hang protection or second rank; pmpm/benchmarks/studies/bad_input.py
+    puts back the process-wide state the command line changes)."""
+    import types
+    from pmpm.benchmarks.studies.bad_input import cli_in_process
+    code, out, err, exc = cli_in_process(args, cwd)
+    if exc is not None:
+        raise exc
+    return types.SimpleNamespace(returncode=code, stdout=out.encode(), stderr=err.encode())
 
 
 def _without_mpirun_report(err):
@@ -409,15 +415,6 @@ def _soft_link(f):
     f["particles/v"] = h5py.SoftLink("/particles/v")  # a loop
 
 
-def _external_link(f):
-    del f["particles/v"]
-    f["particles/v"] = h5py.ExternalLink("/etc/passwd", "/v")
-
-
-def _time_as_text(f):
-    f.attrs["time"] = "soon"
-
-
 RESTARTS = {
     # scene edit, checkpoint edit, --restart target, expected
     "other-material": (sub("E = 100.0", "E = 200.0"), None, "case_results/case.h5",
@@ -442,8 +439,6 @@ RESTARTS = {
     "particle-count-lowered": (None, ("h5", _count_lowered), "case_results/case.h5",
                                "counts of particle ids disagree"),
     "soft-link-loop": (None, ("h5", _soft_link), "case_results/case.h5", "/particles/v is a soft link"),
-    "external-link": (None, ("h5", _external_link), "case_results/case.h5", "/particles/v is an external link"),
-    "time-as-text": (None, ("h5", _time_as_text), "case_results/case.h5", "'time' is missing or not a number"),
 }
 
 
@@ -602,9 +597,9 @@ def tracked_run(tmp_path_factory):
     """A finished run with checkpoints, a tracked point, its CSV and plots and a VTU export."""
     work = tmp_path_factory.mktemp("owned")
     (work / "case.toml").write_text(TRACKED)
-    proc = run_cli(work, "case.toml", "-q", timeout=600)
+    proc = run_in_process(work, "case.toml", "-q")
     assert proc.returncode == 0, proc.stderr.decode()
-    proc = run_cli(work, "export", "case_results/case.h5")
+    proc = run_in_process(work, "export", "case_results/case.h5")
     assert proc.returncode == 0, proc.stderr.decode()
     return work
 
@@ -641,7 +636,7 @@ def test_foreign_files_are_never_overwritten_or_deleted(tmp_path, tracked_run, n
     else:
         path.write_bytes(content)
     before = _tree(tmp_path)
-    line = assert_promise(run_cli(work, *args), 2, f"case_results/{target}: exists and ")
+    line = assert_promise(run_in_process(work, *args), 2, f"case_results/{target}: exists and ")
     assert "overwrites or deletes only the files it wrote" in line
     assert _tree(tmp_path) == before, "a file was written or deleted"
 
@@ -652,12 +647,12 @@ def test_own_files_are_rewritten_and_two_scenes_share_a_folder(tmp_path, tracked
     work = _copy_run(tracked_run, tmp_path / "w")
     first = {k: v for k, v in _tree(work / "case_results").items() if not k.startswith("pmpm-files")}
     (work / "other.toml").write_text(TRACKED.replace("[output]", '[output]\ndirectory = "case_results"'))
-    proc = run_cli(work, "other.toml", "-q")
+    proc = run_in_process(work, "other.toml", "-q")
     assert proc.returncode == 0, proc.stderr.decode()
     after = _tree(work / "case_results")
     assert {k: after[k] for k in first} == first, "the second scene changed the first one's files"
     assert {"other.h5", "other_history_tip.csv", "other_history_tip.png"} <= set(after)
-    proc = run_cli(work, "case.toml", "-q")  # its own files, recorded: no refusal
+    proc = run_in_process(work, "case.toml", "-q")  # its own files, recorded: no refusal
     assert proc.returncode == 0, proc.stderr.decode()
     with open(work / "case_results" / "pmpm-files.json") as fh:
         owners = {n: e["owner"] for n, e in json.load(fh)["files"].items()}
@@ -675,11 +670,15 @@ def test_a_fifo_is_refused_not_waited_on(tmp_path, which):
     else:
         (tmp_path / "case.toml").write_text(ground("pipe")(BASE))
         args, expected = ["case.toml"], "pipe: not a valid"
-    before = _tree(tmp_path / "..") if False else None
+    before = _tree_names(tmp_path)
     line = assert_promise(run_cli(tmp_path, *args, timeout=TIMEOUT), 2, expected)
     assert "FIFO" in line
-    assert sorted(os.listdir(tmp_path)) == sorted(["pipe"] + (["case.toml"] if which == "record" else []))
-    del before
+    assert _tree_names(tmp_path) == before, "a file was written"
+
+
+def _tree_names(root):
+    """The names below ``root`` (a FIFO cannot be hashed by reading it)."""
+    return sorted(os.path.relpath(os.path.join(b, n), root) for b, ds, fs in os.walk(root) for n in ds + fs)
 
 
 def test_a_10000_vertex_polygon_is_checked_in_bounded_memory():
@@ -743,8 +742,11 @@ def tracked_results(tracked_run):
     return tracked_run
 
 
-@pytest.mark.parametrize("command", ["plot", "export", "xdmf"])
-@pytest.mark.parametrize("name", list(BROKEN_RESULTS))
+#: each mutation through one of the three commands (the generated suite crosses them all)
+_COMMANDS = ["plot", "export", "xdmf"]
+
+
+@pytest.mark.parametrize("name,command", [(n, _COMMANDS[k % 3]) for k, n in enumerate(BROKEN_RESULTS)])
 def test_broken_results_files_are_refused_by_plot_and_export(tmp_path, tracked_results, name, command):
     work = _copy_run(tracked_results, tmp_path / "w")
     import shutil
@@ -754,7 +756,7 @@ def test_broken_results_files_are_refused_by_plot_and_export(tmp_path, tracked_r
     args = {"plot": ["plot", "case_results/case.h5", "-o", "plots"], "export": ["export", "case_results/case.h5"],
             "xdmf": ["export", "case_results/case.h5", "--format", "xdmf", "-o", "xd"]}[command]
     before = _tree(tmp_path)
-    line = assert_promise(run_cli(work, *args), 2, "case_results/case.h5: ")
+    line = assert_promise(run_in_process(work, *args), 2, "case_results/case.h5: ")
     assert expected in line, line
     assert _tree(tmp_path) == before, "a file was written (a partial export or plot?)"
 
@@ -792,5 +794,5 @@ def test_api_arguments_of_the_wrong_kind_are_one_line(tmp_path, monkeypatch):
 ])
 def test_command_line_errors_are_one_line_naming_the_subcommand(tmp_path, args, expected):
     before = _tree(tmp_path)
-    assert_promise(run_cli(tmp_path, *args), 2, expected)
+    assert_promise(run_in_process(tmp_path, *args), 2, expected)
     assert _tree(tmp_path) == before

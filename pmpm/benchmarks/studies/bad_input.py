@@ -134,6 +134,8 @@ def _isolated(cwd):
     old_cwd, hook, err = os.getcwd(), sys.excepthook, np.geterr()
     logger = logging.getLogger("pmpm")
     handlers, level = logger.handlers[:], logger.level
+    py_warnings = logging.getLogger("py.warnings")
+    propagate = py_warnings.propagate
     os.chdir(cwd)
     try:
         with warnings.catch_warnings():
@@ -143,6 +145,7 @@ def _isolated(cwd):
         sys.excepthook = hook
         np.seterr(**err)
         logging.captureWarnings(False)
+        py_warnings.propagate = propagate
         logger.handlers[:], logger.level = handlers, level
 
 
