@@ -155,6 +155,9 @@ class Run:
             self._make_directory()
         if write and not restart:
             self._remove_stale_checkpoints()
+        if write:
+            # a disk already full: refused before HDF5 leaves a results file it cannot finish
+            self._ensure_space(self.path, 0)
         self.output = self._guard(self.path, self._open_output) if write else None
         self.history_t, self.history_rows, self.energy_rows = [], [], []
         self.initial_energy = None

@@ -522,6 +522,26 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
         subprocess.run(["umount", str(disk)], capture_output=True)
 
 
+def test_disk_full_at_start_is_one_line_and_leaves_no_results_file(tmp_path):
+    """A disk with less than the write margin free before the run starts: refused before HDF5
+    creates a results file it could not finish (it once left an unreadable one, and a traceback)."""
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        (disk / "fill").write_bytes(b"\0" * (240 << 10))  # 16 KB left: below the 64 KB margin
+        (tmp_path / "case.toml").write_text(BASE + '\n[output]\ndirectory = "disk/out"\n')
+        line = assert_promise(run_cli(tmp_path, "case.toml", "--no-plots"), EXIT_WRITE_FAILED, "disk/out/case.h5")
+        assert "No space left on device" in line
+        assert not (disk / "out" / "case.h5").exists()
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
+
+
 # -- the same table through the Python API (issue 19: the API once skipped the CLI's checks) --
 #: CLI-only cases: a scene file name the API gets as given ("rename:"), flags the API has not
 API_SKIP = {n for n, (edit, _f, args, _c, _e) in CASES.items()
