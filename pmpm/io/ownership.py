@@ -282,7 +282,7 @@ def writing(owner):
         _ACTIVE.pop()
 
 
-def claim(path, owner=None):
+def claim(path):
     """Claim ``path`` in the active :func:`writing` context (which must exist); returns it."""
     if not _ACTIVE:
         raise RuntimeError("pmpm.io.ownership.claim outside a writing() context")

@@ -203,8 +203,9 @@ def _grid(t):
         raise ConfigError(t.path("cells"), f"at most {MAX_CELLS_PER_AXIS} cells per axis (integer range)")
     for d in range(2):
         upper = g.origin[d] + g.cell_size * g.cells[d]
-        if not math.isfinite(upper):
-            raise ConfigError(t.path("cells"), "the grid's extent (cells x cell_size) is not a finite number")
+        if not (math.isfinite(upper) and abs(upper) <= MAX_MAGNITUDE):  # squared in the set-up
+            raise ConfigError(t.path("cells"), f"the grid's extent (cells x cell_size) is not a finite "
+                                               f"number of at most {MAX_MAGNITUDE:g}")
         # positions must resolve the cell size: x + h must differ from x across the whole grid
         if g.cell_size < 1e-9 * max(abs(g.origin[d]), abs(upper)):
             raise ConfigError(t.path("cell_size"), "too small for the grid's coordinates "
