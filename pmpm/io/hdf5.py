@@ -838,6 +838,9 @@ def check_results_file(path):
         check_regular(path)  # a FIFO or device would block or stream forever in HDF5's open
     except OSError:
         raise ValueError("no such file") from None
+    from pmpm.io.validate import crashes_reading
+    if crashes_reading(_check_results_path, path):  # damaged metadata can crash libhdf5 itself
+        raise ValueError("not a usable pmpm results file: HDF5 crashed reading it (the file is damaged)")
     try:
         f = h5py.File(path, "r")
     except OSError:
@@ -848,6 +851,11 @@ def check_results_file(path):
         except (OSError, RuntimeError, KeyError, TypeError) as exc:  # HDF5 cannot read a part
             raise ValueError(f"not a usable pmpm results file: an object cannot be read "
                              f"({type(exc).__name__})") from None
+
+
+def _check_results_path(path):
+    with h5py.File(path, "r") as f:
+        _check_results_open(f)
 
 
 def _check_results_open(f):

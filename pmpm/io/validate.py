@@ -21,7 +21,7 @@ import stat
 import numpy as np
 
 __all__ = ["read_regular", "check_regular", "check_links", "check_results_schema",
-           "check_checkpoint_schema", "FIELD_TRAILING"]
+           "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
 #: the trailing shape of each frame / checkpoint field pmpm writes (docs/output.md); a field not
 #: listed is accepted with any trailing shape
@@ -90,6 +90,25 @@ def check_regular(path):
     st = os.stat(path)
     if not stat.S_ISREG(st.st_mode):
         raise ValueError(_not_regular(st.st_mode))
+
+
+def crashes_reading(fn, *args):
+    """True if ``fn(*args)`` kills the process (a signal: libhdf5 dereferences the damaged
+    metadata of a corrupted file and segfaults, which no exception can catch). It runs in a
+    forked child that only reads and exits without flushing anything; its exceptions are the
+    caller's to meet again in the parent. Without ``os.fork`` (Windows) nothing is checked."""
+    if not hasattr(os, "fork"):
+        return False
+    pid = os.fork()
+    if pid == 0:  # the child: read, then leave at once (no atexit, no buffers flushed)
+        code = 0
+        try:
+            fn(*args)
+        except BaseException:  # noqa: BLE001 - the parent reports exceptions itself
+            code = 1
+        os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    return os.WIFSIGNALED(status)
 
 
 def check_links(f):
