@@ -42,6 +42,24 @@ def _scenes(scene, overrides, variant):
     return resolve_scenes(data, path, variant, overrides)
 
 
+def _check_arguments(write, progress, comm, dataframes):
+    """Refuse arguments of the wrong kind in one ConfigError naming the argument (before
+    anything is read or written), as the command line refuses a bad option."""
+    from pmpm.errors import ConfigError
+
+    if not isinstance(write, bool):
+        raise ConfigError("write", f"must be True or False, not {type(write).__name__}")
+    if not (progress is None or isinstance(progress, bool) or callable(progress)):
+        raise ConfigError("progress", f"must be True, False or a callable, not {type(progress).__name__}")
+    if not (dataframes is None or isinstance(dataframes, bool)):
+        raise ConfigError("dataframes", f"must be None, True or False, not {type(dataframes).__name__}")
+    if comm is not None:
+        from mpi4py import MPI
+        if not isinstance(comm, MPI.Comm) or comm == MPI.COMM_NULL:
+            raise ConfigError("comm", f"must be an mpi4py communicator (e.g. MPI.COMM_WORLD), "
+                                      f"not {type(comm).__name__}")
+
+
 def _progress_callback(progress):
     """Return ``callback(t, end_time)`` or None for the ``progress`` argument of :func:`run`."""
     if progress is None or progress is False:
@@ -148,6 +166,7 @@ def run(scene, overrides=None, write=False, variant=None, progress=None, comm=No
     pmpm.errors.UnstableRunError, pmpm.errors.ParticleExitError
         When the run fails (its last good state is saved when writing).
     """
+    _check_arguments(write, progress, comm, dataframes)
     scenes = _scenes(scene, overrides, variant)
     callback = _progress_callback(progress)
     results = {}
@@ -338,7 +357,10 @@ def load_results(path, dataframes=None):
     from pmpm.io.hdf5 import check_results_file, read_history, read_series
 
     path = os.fspath(path)
-    check_results_file(path)
+    try:  # the whole layout the reads below use (pmpm.io.validate)
+        check_results_file(path)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     pandas = _use_pandas(dataframes)
     times, tracks, columns = read_history(path)
     with h5py.File(path, "r") as f:

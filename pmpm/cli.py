@@ -39,8 +39,9 @@ class _Parser(argparse.ArgumentParser):
     """argparse with pmpm's error convention: one line on stderr (rank 0 only), exit 2."""
 
     def error(self, message):
+        from pmpm.errors import one_line
         where = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
-        self.exit(EXIT_BAD_INPUT, f"pmpm: error: {where}{message}\n" if _rank_env() == 0 else None)
+        self.exit(EXIT_BAD_INPUT, f"pmpm: error: {one_line(where + message)}\n" if _rank_env() == 0 else None)
 
 
 def _add_run(sub):
@@ -100,7 +101,9 @@ def build_parser():
 
 
 def _fail(message, code):
-    print(f"pmpm: error: {message}", file=sys.stderr)
+    """Print the one error line (control characters escaped: one printable line)."""
+    from pmpm.errors import one_line
+    print(f"pmpm: error: {one_line(message)}", file=sys.stderr)
     return code
 
 
@@ -109,8 +112,12 @@ def _bad_input(exc, case, rank):
     import os
     if rank != 0:
         return EXIT_BAD_INPUT
-    names_file = (exc.key == case or os.sep in exc.key or os.path.isfile(exc.key)
-                  or exc.key.lower().endswith(_FILE_SUFFIXES))
+    key = str(exc.key)
+    try:
+        is_file = os.path.isfile(key)
+    except (ValueError, OSError):  # a NUL in the name
+        is_file = False
+    names_file = key == case or os.sep in key or is_file or key.lower().endswith(_FILE_SUFFIXES)
     return _fail(str(exc) if names_file else f"{case}: {exc}", EXIT_BAD_INPUT)
 
 
@@ -141,12 +148,14 @@ def _tool(args):
         return _fail(f"{args.outdir}: --outdir is not a folder", EXIT_BAD_INPUT)
     try:
         if args.command == "plot":
-            from pmpm.io import plot_results
+            from pmpm.io import ownership, plot_results
+            from pmpm.io.plot import scene_stem
             from pmpm.results.post import structural_outputs  # sections and reactions, if any
             outdir = args.outdir or os.path.dirname(os.path.abspath(files[0]))
-            written = plot_results(files, outdir)
-            for f in files:
-                written += structural_outputs(f, outdir)
+            with ownership.writing(scene_stem(files[0])):  # all the command's files, or none
+                written = plot_results(files, outdir)
+                for f in files:
+                    written += structural_outputs(f, outdir)
         else:
             from pmpm.io import export
             written = export(args.file, args.format, args.outdir)
@@ -270,6 +279,18 @@ def run_case(args):
     return 0
 
 
+def _quiet_warnings():
+    """Keep Python's warnings off the terminal: numpy's floating-point warnings (overflow) are
+    dropped, since pmpm checks every value it uses for being finite and says so in its own
+    line; any other warning goes to the logger ``py.warnings``, which prints nothing."""
+    import warnings
+    import numpy as np
+    np.seterr(all="ignore")
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
+    logging.captureWarnings(True)
+    logging.getLogger("py.warnings").propagate = False
+
+
 def _with_command(argv):
     """``argv`` with ``run`` inserted unless it starts with a subcommand or a top-level option."""
     if argv and (argv[0] in SUBCOMMANDS or argv[0] in ("-h", "--help", "--version")):
@@ -287,7 +308,11 @@ def main(argv=None):
                      EXIT_BAD_INPUT)
     if len(argv) == 1 and argv[0] in ("version", "help") and not os.path.exists(argv[0]):
         return _fail(f"{argv[0]}: no such scene file (did you mean pmpm --{argv[0]}?)", EXIT_BAD_INPUT)
-    args = build_parser().parse_args(_with_command(argv))
+    _quiet_warnings()
+    args, extra = build_parser().parse_known_args(_with_command(argv))
+    if extra:  # named after the subcommand, like every other bad argument
+        return (_fail(f"{args.command}: unrecognized arguments: {' '.join(extra)}", EXIT_BAD_INPUT)
+                if _rank_env() == 0 else EXIT_BAD_INPUT)
     if args.command == "run":
         return run_case(args)
     if args.command == "expand":

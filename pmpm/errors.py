@@ -1,6 +1,16 @@
 """Errors that pmpm reports to the user as one line and exit code 2."""
 
-__all__ = ["ConfigError", "UnstableRunError", "ParticleExitError", "OutputWriteError"]
+__all__ = ["ConfigError", "UnstableRunError", "ParticleExitError", "OutputWriteError", "one_line"]
+
+
+def one_line(text):
+    """``text`` as one printable line: every control character (newline, carriage return, NUL,
+    the ESC of a terminal escape sequence, ...) written as its escape (``\\n``, ``\\x1b``), so a
+    name or key from a file can neither split an error line nor drive the terminal."""
+    text = str(text)
+    if all(c.isprintable() for c in text):
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class ConfigError(Exception):
@@ -17,7 +27,7 @@ class ConfigError(Exception):
     def __init__(self, key, reason):
         self.key = key
         self.reason = reason
-        super().__init__(f"{key}: {reason}")
+        super().__init__(one_line(f"{key}: {reason}"))
 
 
 class UnstableRunError(RuntimeError):
@@ -45,4 +55,4 @@ class OutputWriteError(RuntimeError):
     def __init__(self, path, reason):
         self.path = path
         self.reason = reason
-        super().__init__(f"{path}: cannot write ({reason})")
+        super().__init__(one_line(f"{path}: cannot write ({reason})"))

@@ -163,8 +163,14 @@ class Run:
         self.stopped = None
         s = self.solver
         self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
+        self.output = None
+        if write:
+            self._make_directory()
         if write and not restart:
             self._remove_stale_checkpoints()
+        if write:
+            # a disk already full: refused before HDF5 leaves a results file it cannot finish
+            self._ensure_space(self.path, 0)
         self.output = self._guard(self.path, self._open_output) if write else None
         self.history_t, self.history_rows, self.energy_rows = [], [], []
         self.initial_energy = None
@@ -274,6 +280,21 @@ class Run:
         if foreign:
             from pmpm.io.ownership import ForeignFileError
             raise ForeignFileError(*foreign)
+
+    def _make_directory(self):
+        """Create output.directory (rank 0); a folder that cannot be made is bad input, said
+        on every rank together."""
+        from pmpm.errors import ConfigError
+        problem = None
+        if self.rank == 0:
+            try:
+                os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
+            except OSError as exc:
+                problem = exc.strerror or type(exc).__name__
+        problem = self.comm.bcast(problem)
+        if problem:
+            raise ConfigError("output.directory", f"{self.scene.output.directory!r} cannot be "
+                                                  f"created ({problem})")
 
     def _remove_stale_checkpoints(self):
         """A fresh run replaces this run's results file, so the checkpoints and last good state

@@ -4,8 +4,13 @@ from pmpm.benchmarks.block import MATERIALS
 __all__ = ["add_bench_parser", "main"]
 
 
+#: largest count a benchmark option takes (particles, steps, repeats): 10^9 particles already
+#: need ~1 TB; a larger number is a typo (10^15) and would fail inside numpy, not here
+MAX_COUNT = 10 ** 9
+
+
 def _positive(text):
-    """argparse type: an integer >= 1 (a bad value is a one-line error, exit 2)."""
+    """argparse type: an integer from 1 to MAX_COUNT (a bad value is a one-line error, exit 2)."""
     import argparse
     try:
         value = int(text)
@@ -13,6 +18,21 @@ def _positive(text):
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1 (got {value})")
+    if value > MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_COUNT:.0e} (got {value:.3g})")
+    return value
+
+
+def _finite_positive(text):
+    """argparse type: a finite float > 0 and at most 1e15 (inf and nan refused)."""
+    import argparse
+    import math
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and 0 < value <= 1e15):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0 and at most 1e15 (got {text!r})")
     return value
 
 
@@ -64,7 +84,7 @@ def add_bench_parser(sub):
     fc.add_argument("--particles", type=_positive, nargs="+", default=[2_000, 7_700, 8_000, 200_000],
                     help="particle counts of the blocks, timed round robin (default 2000 7700 8000 200000)")
     fc.add_argument("--repeat", type=_positive, default=7, help="timed rounds (default 7)")
-    fc.add_argument("--work", type=float, default=2e6, help="particle-steps per sample")
+    fc.add_argument("--work", type=_finite_positive, default=2e6, help="particle-steps per sample")
     fc.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
                     help="the block's material (default elastic)")
     fc.add_argument("--frame", nargs="*", default=["elastic"], choices=["elastic", "elastoplastic"],

@@ -85,14 +85,25 @@ def _complete_step(path):
     if not os.path.exists(path):
         return None
     try:
-        from pmpm.io.validate import check_regular
+        from pmpm.io.validate import check_regular, crashes_reading
         check_regular(path)  # a FIFO would block HDF5's open
+        if crashes_reading(_read_schema, path):  # damaged metadata can crash libhdf5 itself
+            logger.warning("ignoring damaged checkpoint %s (HDF5 crashed reading it)", path)
+            return None
         with h5py.File(path, "r") as f:
             if bool(f.attrs.get("complete", False)) and "particles/id" in f:
                 return int(f.attrs["step"])
-    except (OSError, KeyError, ValueError) as exc:
-        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError) as exc:  # RuntimeError: HDF5
+        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)  # (a link loop, a bad node)
     return None
+
+
+def _read_schema(path):
+    """Every read the checks make of one checkpoint file (run in a child: it may crash)."""
+    from pmpm.io.validate import check_checkpoint_schema
+    with h5py.File(path, "r") as f:
+        f.attrs.get("complete")
+        check_checkpoint_schema(f, LAYOUT)
 
 
 def latest_checkpoint(path_base):

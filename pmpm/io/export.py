@@ -68,7 +68,7 @@ def _export_vtu(h5_path, outdir):
     with h5py.File(h5_path, "r") as f:
         frames = f["frames"]
         if "x" not in frames:  # checked before anything is written
-            raise ValueError(f"{h5_path} has no /frames/x to use as particle positions")
+            raise ValueError(f"{h5_path}: has no /frames/x to use as particle positions")
         for index, time in enumerate(frames["time"][()]):
             if not np.isfinite(time):
                 continue  # cut short by a crash
@@ -120,7 +120,7 @@ def export(h5_path, fmt="vtu", outdir=None):
             target_dir = os.fspath(outdir) if outdir else folder
             with h5py.File(h5_path, "r") as f:
                 if "frames/x" not in f:  # checked before the folder is made
-                    raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
+                    raise ValueError(f"{h5_path}: has no /frames/x of shape (F, n, 2) to use as geometry")
             target = ownership.claim(os.path.join(target_dir or ".", os.path.basename(stem) + ".xdmf"))
             paths = [write_xdmf(h5_path, target)]
     logger.info("exported %s to %d %s files", h5_path, len(paths), fmt)

@@ -832,30 +832,45 @@ def check_results_file(path):
         If the file cannot be opened as HDF5, or lacks pmpm's ``layout`` attribute
         or the ``/frames``, ``/history`` and ``/energies`` groups.
     """
-    from pmpm.io.validate import check_regular, check_results_schema
+    from pmpm.io.validate import check_regular
     path = os.fspath(path)
     try:
         check_regular(path)  # a FIFO or device would block or stream forever in HDF5's open
     except OSError:
         raise ValueError("no such file") from None
+    from pmpm.io.validate import crashes_reading
+    if crashes_reading(_check_results_path, path):  # damaged metadata can crash libhdf5 itself
+        raise ValueError("not a usable pmpm results file: HDF5 crashed reading it (the file is damaged)")
     try:
         f = h5py.File(path, "r")
     except OSError:
         raise ValueError("not an HDF5 file (pmpm results files are HDF5)") from None
     with f:
-        layout = f.attrs.get("layout")
-        layout = layout.decode() if isinstance(layout, bytes) else layout
-        if not isinstance(layout, str) or not layout.startswith("pmpm-results-"):
-            raise ValueError("not a pmpm results file (no 'layout' attribute of pmpm)")
-        if layout != LAYOUT:
-            raise ValueError(f"results layout {layout!r}, this pmpm reads {LAYOUT!r} (re-run the scene)")
-        missing = [g for g in ("frames", "history", "energies") if g not in f]
-        if missing:
-            raise ValueError(f"not a complete pmpm results file (no /{missing[0]})")
-        try:  # every group, dataset, shape, dtype and attribute the readers use
-            check_results_schema(f)
-        except ValueError as exc:
-            raise ValueError(f"not a usable pmpm results file: {exc}") from None
+        try:
+            _check_results_open(f)
         except (OSError, RuntimeError, KeyError, TypeError) as exc:  # HDF5 cannot read a part
             raise ValueError(f"not a usable pmpm results file: an object cannot be read "
                              f"({type(exc).__name__})") from None
+
+
+def _check_results_path(path):
+    with h5py.File(path, "r") as f:
+        _check_results_open(f)
+
+
+def _check_results_open(f):
+    """The checks of :func:`check_results_file` on the open file (ValueError)."""
+    from pmpm.io.validate import check_results_schema
+    layout = f.attrs.get("layout")
+    layout = layout.decode() if isinstance(layout, bytes) else layout
+    if not isinstance(layout, str) or not layout.startswith("pmpm-results-"):
+        raise ValueError("not a pmpm results file (no 'layout' attribute of pmpm)")
+    if layout != LAYOUT:
+        raise ValueError(f"results layout {layout!r}, this pmpm reads {LAYOUT!r} (re-run the scene)")
+    missing = [g for g in ("frames", "history", "energies") if g not in f]
+    if missing:
+        raise ValueError(f"not a complete pmpm results file (no /{missing[0]})")
+    try:  # every group, dataset, shape, dtype and attribute the readers use
+        check_results_schema(f)
+    except ValueError as exc:
+        raise ValueError(f"not a usable pmpm results file: {exc}") from None

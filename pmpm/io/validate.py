@@ -21,7 +21,7 @@ import stat
 import numpy as np
 
 __all__ = ["read_regular", "check_regular", "check_links", "check_results_schema",
-           "check_checkpoint_schema", "FIELD_TRAILING"]
+           "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
 #: the trailing shape of each frame / checkpoint field pmpm writes (docs/output.md); a field not
 #: listed is accepted with any trailing shape
@@ -90,6 +90,25 @@ def check_regular(path):
     st = os.stat(path)
     if not stat.S_ISREG(st.st_mode):
         raise ValueError(_not_regular(st.st_mode))
+
+
+def crashes_reading(fn, *args):
+    """True if ``fn(*args)`` kills the process (a signal: libhdf5 dereferences the damaged
+    metadata of a corrupted file and segfaults, which no exception can catch). It runs in a
+    forked child that only reads and exits without flushing anything; its exceptions are the
+    caller's to meet again in the parent. Without ``os.fork`` (Windows) nothing is checked."""
+    if not hasattr(os, "fork"):
+        return False
+    pid = os.fork()
+    if pid == 0:  # the child: read, then leave at once (no atexit, no buffers flushed)
+        code = 0
+        try:
+            fn(*args)
+        except BaseException:  # noqa: BLE001 - the parent reports exceptions itself
+            code = 1
+        os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    return os.WIFSIGNALED(status)
 
 
 def check_links(f):
@@ -166,8 +185,10 @@ def _columns(attrs, where):
     cols = attrs.get("columns")
     if cols is None:
         return None
+    if not isinstance(cols, np.ndarray) or cols.ndim != 1:
+        raise ValueError(f"{where} attribute 'columns' is not a list of names")
     try:
-        out = [_text(c) for c in np.asarray(cols).reshape(-1)]
+        out = [_text(c) for c in cols]
     except (TypeError, ValueError):
         raise ValueError(f"{where} attribute 'columns' is not a list of names") from None
     if not all(isinstance(c, str) for c in out):
@@ -177,6 +198,7 @@ def _columns(attrs, where):
 
 def _series(group, where):
     """A group of equal-length 1-D numeric columns, one of them ``time``."""
+    _columns(group.attrs, where)
     lengths = set()
     for name in group:
         d = _dataset(group, name, where)

@@ -253,7 +253,7 @@ def write_xdmf(h5_path, xdmf_path=None):
     with h5py.File(h5_path, "r") as f:
         x = f.get("frames/x")
         if x is None or x.shape[2:] != (2,):
-            raise ValueError(f"{h5_path} has no /frames/x of shape (F, n, 2) to use as geometry")
+            raise ValueError(f"{h5_path}: has no /frames/x of shape (F, n, 2) to use as geometry")
     complete = write_views(h5_path)
     with h5py.File(h5_path, "r") as f:
         times, n, specs = f["frames/time"][()], f["frames/x"].shape[1], view_specs(f)

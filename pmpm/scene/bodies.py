@@ -91,6 +91,10 @@ def _i_section(geo, grid, ppc, key):
     return pts, area, thickness
 
 
+#: largest mesh file read (a 2-D mesh of a million elements is ~100 MB of text)
+MAX_MESH_BYTES = 512 << 20
+
+
 def _mesh(geo, scene_dir, thickness):
     """Points per element of a mesh file read with meshio (triangles and quads)."""
     import contextlib
@@ -100,6 +104,8 @@ def _mesh(geo, scene_dir, thickness):
     path = geo["file"] if os.path.isabs(geo["file"]) else os.path.join(scene_dir, geo["file"])
     if not os.path.isfile(path):  # also keeps meshio off devices such as /dev/zero
         raise ConfigError(path, "cannot read mesh (no such regular file)")
+    if os.path.getsize(path) > MAX_MESH_BYTES:  # meshio reads it whole
+        raise ConfigError(path, f"cannot read mesh (larger than {MAX_MESH_BYTES >> 20} MB)")
     said = io.StringIO()  # meshio prints reader errors and calls sys.exit(1) on unreadable files
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):

@@ -20,7 +20,7 @@ from pmpm.physics.materials import make_material
 from pmpm.scene.expressions import parse_expression
 from pmpm.scene.limits import check_memory, check_time_step
 from pmpm.scene.names import check_name, check_output_directory, check_output_files
-from pmpm.scene.tables import REQUIRED, Table
+from pmpm.scene.tables import MAX_MAGNITUDE, REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
 from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 
@@ -206,8 +206,9 @@ def _grid(t):
         raise ConfigError(t.path("cells"), f"at most {MAX_CELLS_PER_AXIS} cells per axis (integer range)")
     for d in range(2):
         upper = g.origin[d] + g.cell_size * g.cells[d]
-        if not math.isfinite(upper):
-            raise ConfigError(t.path("cells"), "the grid's extent (cells x cell_size) is not a finite number")
+        if not (math.isfinite(upper) and abs(upper) <= MAX_MAGNITUDE):  # squared in the set-up
+            raise ConfigError(t.path("cells"), f"the grid's extent (cells x cell_size) is not a finite "
+                                               f"number of at most {MAX_MAGNITUDE:g}")
         # positions must resolve the cell size: x + h must differ from x across the whole grid
         if g.cell_size < 1e-9 * max(abs(g.origin[d]), abs(upper)):
             raise ConfigError(t.path("cell_size"), "too small for the grid's coordinates "
@@ -231,6 +232,8 @@ def _velocity(t, name):
             parse_expression(v, t.path(name))
         elif not math.isfinite(v):
             raise ConfigError(t.path(name), "must be finite")
+        elif abs(v) > MAX_MAGNITUDE:  # v*v and the kinetic energy must stay finite
+            raise ConfigError(t.path(name), f"must be at most {MAX_MAGNITUDE:g} in magnitude (got {v:g})")
     return tuple(float(v) if not isinstance(v, str) else v for v in value)
 
 
@@ -270,7 +273,12 @@ def _check_velocity_values(bodies, grid):
         lo, hi = _body_box(body, grid)
         X, Y = np.meshgrid(np.linspace(lo[0], hi[0], 41), np.linspace(lo[1], hi[1], 41), indexing="ij")
         for v in exprs:
-            parse_expression(v, f"bodies[{k}].velocity").evaluate(X.ravel(), Y.ravel(), f"bodies[{k}].velocity")
+            key = f"bodies[{k}].velocity"
+            with np.errstate(all="ignore"):  # non-finite values are refused by evaluate
+                out = parse_expression(v, key).evaluate(X.ravel(), Y.ravel(), key)
+            if np.abs(out).max() > MAX_MAGNITUDE:
+                raise ConfigError(key, f"expression {v!r} exceeds {MAX_MAGNITUDE:g} in magnitude "
+                                       f"on the body")
 
 
 def _polygon_vertices(t):
@@ -278,8 +286,10 @@ def _polygon_vertices(t):
     import numpy as np
     verts = t.raw("vertices")
     if (not isinstance(verts, list) or len(verts) < 3 or len(verts) > 10000
-            or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) for c in v) for v in verts)):
-        raise ConfigError(t.path("vertices"), "must be a list of 3 to 10000 [x, y] points")
+            or not all(isinstance(v, list) and len(v) == 2 and all(_finite(c) and abs(c) <= MAX_MAGNITUDE
+                                                                   for c in v) for v in verts)):
+        raise ConfigError(t.path("vertices"), f"must be a list of 3 to 10000 [x, y] points (each "
+                                              f"coordinate at most {MAX_MAGNITUDE:g} in magnitude)")
     P = np.array(verts, dtype=float)
     Q = np.roll(P, -1, axis=0)
     scale = float(np.ptp(P, axis=0).max())
@@ -293,14 +303,26 @@ def _polygon_vertices(t):
         return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
                        - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
     n = len(P)
-    i, j = np.triu_indices(n, k=2)
-    keep = ~((i == 0) & (j == n - 1))  # the first and last edges share a vertex
-    i, j = i[keep], j[keep]
-    a, b, c, d = P[i], Q[i], P[j], Q[j]
-    crosses = (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)
-    if crosses.any():
-        raise ConfigError(t.path("vertices"), f"edges {int(i[crosses][0])} and {int(j[crosses][0])} "
-                                              f"cross (the polygon must be simple)")
+    # all pairs of edges, a block of first edges at a time (all 50 million pairs of a 10,000-vertex
+    # polygon at once took 763 MB): the edges' bounding boxes are compared by broadcasting, the
+    # orientation test runs only on the pairs whose boxes overlap
+    lo, hi = np.minimum(P, Q), np.maximum(P, Q)
+    block = max(1, (1 << 19) // n)
+    cols = np.arange(n)
+    for first in range(0, n, block):
+        rows = np.arange(first, min(first + block, n))
+        near = cols[None, :] >= rows[:, None] + 2  # adjacent edges share a vertex
+        for d in range(2):
+            near &= (lo[rows, None, d] <= hi[None, :, d]) & (lo[None, :, d] <= hi[rows, None, d])
+        if first == 0:
+            near[0, n - 1] = False  # the first and last edges share a vertex
+        i, j = np.nonzero(near)
+        i = i + first
+        a, b, c, d = P[i], Q[i], P[j], Q[j]
+        crosses = (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)
+        if crosses.any():
+            raise ConfigError(t.path("vertices"), f"edges {int(i[crosses][0])} and {int(j[crosses][0])} "
+                                                  f"cross (the polygon must be simple)")
     return tuple(tuple(float(c) for c in v) for v in verts)
 
 
@@ -313,13 +335,13 @@ def _geometry(t, shape):
     elif shape == "polygon":
         geo = {"vertices": _polygon_vertices(t)}
     elif shape == "circle":
-        geo = {"center": t.vector("center"), "radius": t.number("radius", low=0, low_open=True)}
+        geo = {"center": t.vector("center"), "radius": t.number("radius", low=0, low_open=True, magnitude=MAX_MAGNITUDE)}
     elif shape == "i_section":
         geo = {"start": t.vector("start"), "end": t.vector("end"),
-               "depth": t.number("depth", low=0, low_open=True),
-               "flange_width": t.number("flange_width", low=0, low_open=True),
-               "flange_thickness": t.number("flange_thickness", low=0, low_open=True),
-               "web_thickness": t.number("web_thickness", low=0, low_open=True),
+               "depth": t.number("depth", low=0, low_open=True, magnitude=MAX_MAGNITUDE),
+               "flange_width": t.number("flange_width", low=0, low_open=True, magnitude=MAX_MAGNITUDE),
+               "flange_thickness": t.number("flange_thickness", low=0, low_open=True, magnitude=MAX_MAGNITUDE),
+               "web_thickness": t.number("web_thickness", low=0, low_open=True, magnitude=MAX_MAGNITUDE),
                "area": t.number("area", None, low=0, low_open=True),
                "inertia": t.number("inertia", None, low=0, low_open=True)}
         if 2 * geo["flange_thickness"] >= geo["depth"]:
@@ -329,7 +351,7 @@ def _geometry(t, shape):
     else:  # mesh
         geo = {"file": t.string("file"),
                "particles_per_element": t.integer("particles_per_element", 1, low=1, high=16),
-               "scale": t.number("scale", 1.0, low=0, low_open=True),
+               "scale": t.number("scale", 1.0, low=0, low_open=True, magnitude=MAX_MAGNITUDE),
                "offset": t.vector("offset", (0.0, 0.0))}
     return geo
 
@@ -493,7 +515,7 @@ def _ground_motion(t):
     gm = {"file": t.string("file"),
           "format": t.string("format", "auto", choices=("auto", "two_column", "at2")),
           "direction": t.string("direction", "x", choices=("x", "y")),
-          "scale": t.number("scale", 1.0),
+          "scale": t.number("scale", 1.0, magnitude=MAX_MAGNITUDE),
           "boundaries": t.raw("boundaries", [])}
     if not isinstance(gm["boundaries"], list) or not all(isinstance(b, str) for b in gm["boundaries"]):
         raise ConfigError(t.path("boundaries"), "must be a list of [[boundary]] names")
@@ -525,12 +547,13 @@ def _damping(t):
     ``{ratio = xi, periods = [T1, T2]}`` asking for Rayleigh damping (pmpm.physics.damping).
     Returns (mass coefficient, Rayleigh dict or None); a ratio of 0 is no damping."""
     if not isinstance(t.data.get("damping"), dict):
-        return t.number("damping", 0.0, low=0.0), None
+        return t.number("damping", 0.0, low=0.0, magnitude=MAX_MAGNITUDE), None
     d = t.table("damping")
     ratio = d.number("ratio", low=0.0, high=1.0)
     periods = d.raw("periods")
     if (not isinstance(periods, list) or len(periods) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                       and 1.0 / MAX_MAGNITUDE <= v <= MAX_MAGNITUDE  # the coefficients stay finite
                        for v in periods)):
         raise ConfigError(d.path("periods"), f"must be two periods > 0 in s, [T1, T2] (got {periods!r})")
     d.finish()

@@ -145,6 +145,10 @@ def check_output_files(scenes):
             seen[where] = (key + (f" of variant {scene.variant!r}" if scene.variant else ""), key, name)
 
 
+#: kernel file systems: writes there fail or do something else than store a file
+_PSEUDO = ("/proc", "/sys", "/dev")
+
+
 def check_output_directory(directory, key="output.directory"):
     """Refuse an output directory that is empty, a file, below a file or not writable (no
     file is created here)."""
@@ -153,6 +157,11 @@ def check_output_directory(directory, key="output.directory"):
     if "\0" in directory:
         raise ConfigError(key, "holds a NUL character")
     path = os.path.abspath(directory)
+    real = os.path.realpath(path)
+    for system in _PSEUDO:
+        if real == system or real.startswith(system + os.sep):
+            raise ConfigError(key, f"{directory!r} lies in {system}, a kernel file system, not a "
+                                   f"place for results")
     if os.path.exists(path) and not os.path.isdir(path):
         raise ConfigError(key, f"{directory!r} exists and is not a directory")
     probe = path

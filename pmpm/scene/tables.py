@@ -8,9 +8,18 @@ import math
 
 from pmpm.errors import ConfigError
 
-__all__ = ["Table", "REQUIRED"]
+__all__ = ["Table", "REQUIRED", "MAX_MAGNITUDE"]
 
 REQUIRED = object()
+#: largest magnitude of a coordinate, length, velocity, load or scale a scene may give: its
+#: square, and its product with another such number, stay finite in double precision, so no
+#: set-up computation or first step overflows (docs/scenes.md)
+MAX_MAGNITUDE = 1e100
+
+
+def _control(text):
+    """The first control character (NUL, newline, ESC, ...) of ``text``, or None."""
+    return next((c for c in text if ord(c) < 32 or 127 <= ord(c) < 160), None)
 
 
 def _is_number(value):
@@ -48,14 +57,18 @@ class Table:
             raise ConfigError(self.path(name), "missing (required)")
         return default, False
 
-    def number(self, name, default=REQUIRED, low=None, high=None, low_open=False, high_open=False):
-        """A finite float, optionally bounded; ``None`` default allowed (returns None)."""
+    def number(self, name, default=REQUIRED, low=None, high=None, low_open=False, high_open=False,
+               magnitude=None):
+        """A finite float, optionally bounded (``magnitude``: at most that in absolute value);
+        ``None`` default allowed (returns None)."""
         value, given = self._get(name, default)
         if not given:
             return value
         if not _is_number(value) or not math.isfinite(value):
             raise ConfigError(self.path(name), f"must be a finite number (got {value!r})")
         value = float(value)
+        if magnitude is not None and abs(value) > magnitude:
+            raise ConfigError(self.path(name), f"must be at most {magnitude:g} in magnitude (got {value:g})")
         if low is not None and (value < low or (low_open and value == low)):
             raise ConfigError(self.path(name), f"must be {'>' if low_open else '>='} {low:g} (got {value:g})")
         if high is not None and (value > high or (high_open and value == high)):
@@ -82,6 +95,9 @@ class Table:
             return value
         if not isinstance(value, str):
             raise ConfigError(self.path(name), f"must be a string (got {value!r})")
+        bad = _control(value)
+        if bad is not None:  # a NUL breaks HDF5 attributes, a newline or ESC the log and errors
+            raise ConfigError(self.path(name), f"holds the control character {bad!r}")
         if choices is not None and value not in choices:
             raise ConfigError(self.path(name), f"must be one of {', '.join(choices)} (got {value!r})")
         return value
@@ -92,14 +108,18 @@ class Table:
             raise ConfigError(self.path(name), f"must be true or false (got {value!r})")
         return value
 
-    def vector(self, name, default=REQUIRED, length=2, positive=False):
-        """A list of ``length`` finite numbers, as a tuple of floats."""
+    def vector(self, name, default=REQUIRED, length=2, positive=False, magnitude=MAX_MAGNITUDE):
+        """A list of ``length`` finite numbers, each at most ``magnitude`` in absolute value,
+        as a tuple of floats."""
         value, given = self._get(name, default)
         if not given:
             return value
         if (not isinstance(value, list) or len(value) != length
                 or not all(_is_number(v) and math.isfinite(v) for v in value)):
             raise ConfigError(self.path(name), f"must be a list of {length} numbers (got {value!r})")
+        if magnitude is not None and any(abs(v) > magnitude for v in value):
+            raise ConfigError(self.path(name), f"every entry must be at most {magnitude:g} in "
+                                               f"magnitude (got {value!r})")
         if positive and any(v <= 0 for v in value):
             raise ConfigError(self.path(name), f"must be positive (got {value!r})")
         return tuple(float(v) for v in value)

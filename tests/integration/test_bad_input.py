@@ -257,6 +257,22 @@ CASES = {
     "scene-nul-bytes": (lambda t: b"\0" * 64, {}, ["--check"], 2, "case.toml: not valid TOML"),
     "scene-huge": (lambda t: t + "#" * (2 << 20), {}, ["--check"], 2, "not a scene file"),
     "scene-name-space": ("rename:my case.toml", {}, ["--check"], 2, "may hold only"),
+    # 7b. numbers that would overflow the set-up or the first step, strings that would break the
+    # one line (issue 19): refused when the scene is read
+    "circle-radius-1e308": (body('shape = "circle"\ncenter = [3.0, 1.0]\nradius = 1e308'), {}, ["--check"], 2,
+                            "bodies[1].radius: must be at most 1e+100 in magnitude"),
+    "velocity-1e308": (sub("velocity = [0.1, 0.0]", "velocity = [1e308, 0.0]"), {}, ["--check"], 2,
+                       "bodies[0].velocity: must be at most 1e+100"),
+    "gravity-1e308": (add("[loads]\ngravity = [0.0, -1e308]"), {}, ["--check"], 2,
+                      "loads.gravity: every entry must be at most 1e+100"),
+    "ground-scale-1e308": (lambda t: ground("rec.txt")(t) + "scale = 1e308\n", {"rec.txt": "0.0 0.1\n0.02 0.0\n"},
+                           ["--check"], 2, "loads.ground_motion.scale: must be at most 1e+100"),
+    "title-nul": (top('title = "a\\u0000b"'), {}, [], 2, "case.toml: title: holds the control character '\\x00'"),
+    "title-newline": (top('title = "a\\nb"'), {}, ["--check"], 2, "title: holds the control character '\\n'"),
+    "key-ansi-escape": (sub("[solver]\n", '[solver]\n"\\u001b[31mred" = 1\n'), {}, ["--check"], 2,
+                        "case.toml: solver.\\x1b[31mred: unknown key"),
+    "output-directory-proc": (add('[output]\ndirectory = "/proc/pmpm_out"'), {}, [], 2,
+                              "output.directory: '/proc/pmpm_out' lies in /proc"),
     # 8. combinations pmpm does not support: CPDI's corners in the contact solver's kernels
     "cpdi-with-contact": (lambda t: sub("end_time = 0.01", 'end_time = 0.01\ninterpolation = "cpdi"')(t)
                           + "\n[contact]\nfriction = 0.0\n", {}, ["--check"], 2,
@@ -313,6 +329,18 @@ def run_cli(cwd, *args, timeout=TIMEOUT, ranks=0):
     return subprocess.run(cmd, cwd=cwd, capture_output=True, timeout=timeout, env=env)
 
 
+def run_in_process(cwd, *args):
+    """``pmpm args`` in this process, as :func:`run_cli` reports it (no interpreter start: the
+    cases that need no hang protection or second rank; pmpm/benchmarks/studies/bad_input.py
+    puts back the process-wide state the command line changes)."""
+    import types
+    from pmpm.benchmarks.studies.bad_input import cli_in_process
+    code, out, err, exc = cli_in_process(args, cwd)
+    if exc is not None:
+        raise exc
+    return types.SimpleNamespace(returncode=code, stdout=out.encode(), stderr=err.encode())
+
+
 def _without_mpirun_report(err):
     """Standard error without mpirun's own boxed report of a non-zero exit (lines of dashes
     around it), which is mpirun's, not pmpm's."""
@@ -365,7 +393,7 @@ def test_bad_input_keeps_the_promise(tmp_path, name, ranks):
 
 def test_scene_from_dev_zero_and_a_directory(tmp_path):
     for target, expected in (("/dev/zero", "/dev/zero: is not a regular file"),
-                             (str(tmp_path), "cannot read")):
+                             (str(tmp_path), "is not a regular file (a folder)")):
         before = _tree(tmp_path)
         assert_promise(run_cli(tmp_path, target, "--check"), 2, expected)
         assert _tree(tmp_path) == before
@@ -432,6 +460,22 @@ def _drop_record(attrs):
     del attrs["scene_record"]
 
 
+def _positions_3_columns(f):
+    x = f["particles/x"][()]
+    del f["particles/x"]
+    f["particles/x"] = np.concatenate([x, np.zeros((len(x), 1))], axis=1)
+
+
+def _count_lowered(f):
+    """The root particle count lowered by 5 (the arrays and the JSON record keep theirs)."""
+    f.attrs["n_total"] = int(f.attrs["n_total"]) - 5
+
+
+def _soft_link(f):
+    del f["particles/v"]
+    f["particles/v"] = h5py.SoftLink("/particles/v")  # a loop
+
+
 RESTARTS = {
     # scene edit, checkpoint edit, --restart target, expected
     "other-material": (sub("E = 100.0", "E = 200.0"), None, "case_results/case.h5",
@@ -450,6 +494,12 @@ RESTARTS = {
                        "particle ids"),
     "missing-checkpoint": (None, None, "nowhere/case.h5", "cannot restart"),
     "garbage-checkpoint": (None, ("garbage", None), "case_results/case.h5", "cannot restart"),
+    # issue 19: a checkpoint's layout checked before it is used
+    "positions-3-columns": (None, ("h5", _positions_3_columns), "case_results/case.h5",
+                            "/particles/x has shape (32, 3), expected (32, 2)"),
+    "particle-count-lowered": (None, ("h5", _count_lowered), "case_results/case.h5",
+                               "counts of particle ids disagree"),
+    "soft-link-loop": (None, ("h5", _soft_link), "case_results/case.h5", "/particles/v is a soft link"),
 }
 
 
@@ -469,6 +519,9 @@ def test_restart_refuses_foreign_and_crafted_checkpoints(tmp_path, finished_run,
             path = work / "case_results" / f"case.ckpt{k}.h5"
             if kind == "garbage":
                 path.write_bytes(b"not an HDF5 file")
+            elif kind == "h5":
+                with h5py.File(path, "r+") as f:
+                    fn(f)
             elif kind == "attrs":
                 _craft(path, edit_attrs=fn)
             else:
@@ -526,6 +579,26 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
         proc = run_cli(room, "case.toml", "--restart", "disk/out/case.h5", "--no-plots", timeout=300)
         assert proc.returncode == 0, proc.stderr.decode()
         assert f"t = {max(complete):.6g} s" in proc.stdout.decode()
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
+
+
+def test_disk_full_at_start_is_one_line_and_leaves_no_results_file(tmp_path):
+    """A disk with less than the write margin free before the run starts: refused before HDF5
+    creates a results file it could not finish (it once left an unreadable one, and a traceback)."""
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        (disk / "fill").write_bytes(b"\0" * (240 << 10))  # 16 KB left: below the 64 KB margin
+        (tmp_path / "case.toml").write_text(BASE + '\n[output]\ndirectory = "disk/out"\n')
+        line = assert_promise(run_cli(tmp_path, "case.toml", "--no-plots"), EXIT_WRITE_FAILED, "disk/out/case.h5")
+        assert "No space left on device" in line
+        assert not (disk / "out" / "case.h5").exists()
     finally:
         subprocess.run(["umount", str(disk)], capture_output=True)
 
@@ -605,9 +678,9 @@ def tracked_run(tmp_path_factory):
     """A finished run with checkpoints, a tracked point, its CSV and plots and a VTU export."""
     work = tmp_path_factory.mktemp("owned")
     (work / "case.toml").write_text(TRACKED)
-    proc = run_cli(work, "case.toml", "-q", timeout=600)
+    proc = run_in_process(work, "case.toml", "-q")
     assert proc.returncode == 0, proc.stderr.decode()
-    proc = run_cli(work, "export", "case_results/case.h5")
+    proc = run_in_process(work, "export", "case_results/case.h5")
     assert proc.returncode == 0, proc.stderr.decode()
     return work
 
@@ -644,7 +717,7 @@ def test_foreign_files_are_never_overwritten_or_deleted(tmp_path, tracked_run, n
     else:
         path.write_bytes(content)
     before = _tree(tmp_path)
-    line = assert_promise(run_cli(work, *args), 2, f"case_results/{target}: exists and ")
+    line = assert_promise(run_in_process(work, *args), 2, f"case_results/{target}: exists and ")
     assert "overwrites or deletes only the files it wrote" in line
     assert _tree(tmp_path) == before, "a file was written or deleted"
 
@@ -655,13 +728,152 @@ def test_own_files_are_rewritten_and_two_scenes_share_a_folder(tmp_path, tracked
     work = _copy_run(tracked_run, tmp_path / "w")
     first = {k: v for k, v in _tree(work / "case_results").items() if not k.startswith("pmpm-files")}
     (work / "other.toml").write_text(TRACKED.replace("[output]", '[output]\ndirectory = "case_results"'))
-    proc = run_cli(work, "other.toml", "-q")
+    proc = run_in_process(work, "other.toml", "-q")
     assert proc.returncode == 0, proc.stderr.decode()
     after = _tree(work / "case_results")
     assert {k: after[k] for k in first} == first, "the second scene changed the first one's files"
     assert {"other.h5", "other_history_tip.csv", "other_history_tip.png"} <= set(after)
-    proc = run_cli(work, "case.toml", "-q")  # its own files, recorded: no refusal
+    proc = run_in_process(work, "case.toml", "-q")  # its own files, recorded: no refusal
     assert proc.returncode == 0, proc.stderr.decode()
     with open(work / "case_results" / "pmpm-files.json") as fh:
         owners = {n: e["owner"] for n, e in json.load(fh)["files"].items()}
     assert owners["case_history_tip.csv"] == "case" and owners["other_history_tip.csv"] == "other"
+
+
+# -- files read: FIFOs, broken results files, the API's arguments (issue 19) ---------------------
+@pytest.mark.parametrize("which", ["scene", "record"])
+def test_a_fifo_is_refused_not_waited_on(tmp_path, which):
+    """A FIFO as the scene file or as the ground-motion record: opened non-blocking and refused
+    (it once blocked forever: the timeout fails the case)."""
+    os.mkfifo(tmp_path / "pipe")
+    if which == "scene":
+        args, expected = ["pipe", "--check"], "pipe: is not a regular file (a FIFO)"
+    else:
+        (tmp_path / "case.toml").write_text(ground("pipe")(BASE))
+        args, expected = ["case.toml"], "pipe: not a valid"
+    before = _tree_names(tmp_path)
+    line = assert_promise(run_cli(tmp_path, *args, timeout=TIMEOUT), 2, expected)
+    assert "FIFO" in line
+    assert _tree_names(tmp_path) == before, "a file was written"
+
+
+def _tree_names(root):
+    """The names below ``root`` (a FIFO cannot be hashed by reading it)."""
+    return sorted(os.path.relpath(os.path.join(b, n), root) for b, ds, fs in os.walk(root) for n in ds + fs)
+
+
+def test_a_10000_vertex_polygon_is_checked_in_bounded_memory():
+    """The crossing check of a 10,000-vertex polygon (the largest allowed) once took 763 MB at
+    --check; in blocks of pairs it stays under 100 MB (tracemalloc sees numpy's allocations)."""
+    import math
+    import tracemalloc
+    from pmpm.scene.config import _polygon_vertices
+    from pmpm.scene.tables import Table
+    n = 10000
+    verts = [[math.cos(2 * math.pi * k / n), math.sin(2 * math.pi * k / n)] for k in range(n)]
+    tracemalloc.start()
+    try:
+        _polygon_vertices(Table({"vertices": verts}, "bodies[0]"))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 100e6, peak
+    bad = verts[:]
+    bad[10], bad[5000] = bad[5000], bad[10]  # two far vertices swapped: edges cross
+    from pmpm.errors import ConfigError
+    with pytest.raises(ConfigError, match="cross"):
+        _polygon_vertices(Table({"vertices": bad}, "bodies[0]"))
+
+
+def _h5_edit(edit):
+    def apply(path):
+        with h5py.File(path, "r+") as f:
+            edit(f)
+    return apply
+
+
+def _replace(name, data):
+    def edit(f):
+        del f[name]
+        f[name] = data
+    return edit
+
+
+def _link(name, link):
+    def edit(f):
+        del f[name]
+        f[name] = link
+    return edit
+
+
+#: results-file mutation, the line must contain
+BROKEN_RESULTS = {
+    "external-link": (_link("frames/v", h5py.ExternalLink("/etc/passwd", "/x")), "/frames/v is an external link"),
+    "soft-link-loop": (_link("frames/v", h5py.SoftLink("/frames/v")), "/frames/v is a soft link"),
+    "positions-as-strings": (lambda f: _replace("frames/x", np.full(f["frames/x"].shape[:2], b"x"))(f),
+                             "/frames/x holds |S1 values"),
+    "history-1d": (lambda f: _replace("history/tip", f["history/tip"][:, 0])(f), "/history/tip has shape"),
+    "no-n-total": (lambda f: f.attrs.__delitem__("n_total"), "'n_total' is missing"),
+    "step-count": (lambda f: _replace("frames/step", np.arange(1))(f), "/frames/step has shape (1,)"),
+}
+
+
+@pytest.fixture(scope="module")
+def tracked_results(tracked_run):
+    return tracked_run
+
+
+#: each mutation through one of the three commands (the generated suite crosses them all)
+_COMMANDS = ["plot", "export", "xdmf"]
+
+
+@pytest.mark.parametrize("name,command", [(n, _COMMANDS[k % 3]) for k, n in enumerate(BROKEN_RESULTS)])
+def test_broken_results_files_are_refused_by_plot_and_export(tmp_path, tracked_results, name, command):
+    work = _copy_run(tracked_results, tmp_path / "w")
+    import shutil
+    shutil.rmtree(work / "case_results" / "case_vtu")
+    edit, expected = BROKEN_RESULTS[name]
+    _h5_edit(edit)(work / "case_results" / "case.h5")
+    args = {"plot": ["plot", "case_results/case.h5", "-o", "plots"], "export": ["export", "case_results/case.h5"],
+            "xdmf": ["export", "case_results/case.h5", "--format", "xdmf", "-o", "xd"]}[command]
+    before = _tree(tmp_path)
+    line = assert_promise(run_in_process(work, *args), 2, "case_results/case.h5: ")
+    assert expected in line, line
+    assert _tree(tmp_path) == before, "a file was written (a partial export or plot?)"
+
+
+def test_api_arguments_of_the_wrong_kind_are_one_line(tmp_path, monkeypatch):
+    import pmpm
+    from pmpm.errors import ConfigError
+    (tmp_path / "case.toml").write_text(BASE)
+    monkeypatch.chdir(tmp_path)
+    for kwargs, expected in (({"comm": "world"}, "comm: must be an mpi4py communicator"),
+                             ({"write": "yes"}, "write: must be True or False"),
+                             ({"dataframes": "x"}, "dataframes: must be None"),
+                             ({"progress": 3}, "progress: must be True")):
+        with pytest.raises(ConfigError, match=expected):
+            pmpm.run("case.toml", **kwargs)
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(ConfigError, match="'afile' exists and is not a directory"):
+        pmpm.run("case.toml", write=True, overrides={"output.directory": "afile"})
+    with h5py.File(tmp_path / "part.h5", "w") as f:  # only part of the layout
+        f.attrs["layout"] = "pmpm-results-2"
+        for g in ("frames", "history", "energies"):
+            f.create_group(g)
+    with pytest.raises(ValueError, match="part.h5: not a usable pmpm results file: the root attribute 'n_total'"):
+        pmpm.load_results(tmp_path / "part.h5")
+    assert sorted(os.listdir(tmp_path)) == ["afile", "case.toml", "part.h5"]
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["bench", "throughput", "--particles", "1000000000000000"], "bench throughput: argument --particles: must be at most"),
+    (["bench", "fixedcost", "--work", "inf"], "bench fixedcost: argument --work: must be a finite number"),
+    (["bench", "fixedcost", "--work", "nan"], "argument --work: must be a finite number"),
+    (["case.toml", "--bogus"], "run: unrecognized arguments: --bogus"),
+    (["plot", "x.h5", "--nope"], "plot: unrecognized arguments: --nope"),
+    (["case\nname.toml", "--check"], "case\\nname.toml: cannot read"),
+])
+def test_command_line_errors_are_one_line_naming_the_subcommand(tmp_path, args, expected):
+    before = _tree(tmp_path)
+    assert_promise(run_in_process(tmp_path, *args), 2, expected)
+    assert _tree(tmp_path) == before
