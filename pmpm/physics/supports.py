@@ -13,11 +13,12 @@ kinetic energy, the projection in the nodal mass norm:
     A = N M^-1 N^T,   A lambda = N v - v_bc,   v <- v - M^-1 N^T lambda
 
 (M the lumped nodal masses; a node a box boundary fixes is not changed: its column is dropped,
-as if its mass were infinite). Where the rows are dependent (more held particles along the face
-than node rows under it, as with 4 particles per cell and cubic B-splines) A is singular but
-the system is consistent (v = v_bc satisfies it); lambda is its minimum-norm solution, through
-the eigenvalues of A above ``RANK_TOLERANCE`` of the largest, which imposes every independent
-row exactly. Nothing depends on where the face lies relative to the grid: on a grid edge, inside
+as if its mass were infinite). Where the rows are dependent (more held particles along the face than node rows under it, as
+with 4 particles per cell and cubic B-splines) A is singular but the system is consistent
+(v = v_bc satisfies it); the kernel (pmpm.core.kernels.support.support_solve) factorises A by
+Cholesky with diagonal pivoting and stops at the pivots below ``RANK_TOLERANCE`` of its largest
+diagonal (the dependent rows), which imposes every independent row exactly. Any solution lambda
+gives the same correction M^-1 N^T lambda (lambda's null-space part is N^T's). Nothing depends on where the face lies relative to the grid: on a grid edge, inside
 the grid, on or off the node lines the held particles get exactly the prescribed velocity, and
 since positions move with the same velocity, a fixed face stays where it is.
 
@@ -41,16 +42,16 @@ import logging
 
 import numpy as np
 
-from pmpm.core.kernels.support import row_width, support_rows
+from pmpm.core.kernels.support import row_width, support_gather, support_rows, support_solve
 from pmpm.errors import ConfigError
 from pmpm.physics.boundary import COMPONENTS, FACES
 
 __all__ = ["HeldFaces", "face_layer", "RANK_TOLERANCE"]
 logger = logging.getLogger(__name__)
 
-#: eigenvalues of A = N M^-1 N^T below this fraction of the largest belong to dependent rows
-#: (they vanish in exact arithmetic); round-off puts them near 1e-16 of the largest
-RANK_TOLERANCE = 1e-10
+#: pivots of A = N M^-1 N^T below this fraction of its largest diagonal belong to dependent
+#: rows (they vanish in exact arithmetic); round-off puts them near 1e-16 of the largest
+RANK_TOLERANCE = 1e-6
 
 
 def face_layer(bc, bodies, points):
@@ -111,7 +112,8 @@ class HeldFaces:
         self.ids, self.which = ids[order], which[order]
         #: default moment point of each support's reaction: the centroid of its held particles
         self.centroids = {bc: c for bc, c in zip(self.boundaries, centroids)}
-        self._rows = None
+        #: the solver of the projection (the numba kernel; tests swap in its NumPy twin)
+        self.solve = support_solve
 
     # -- set-up -------------------------------------------------------------------------------
     def mark(self, particles):
@@ -143,52 +145,23 @@ class HeldFaces:
         reaction (added to ``solver.reactions`` and the support work to the energy balance)."""
         w, g = solver.window, self.grid
         G = w.G
-        idx, ids, sup, nodes, weights = self._local_rows(solver)
+        _, ids, sup, nodes, weights = self._local_rows(solver)
         ny = g.nodes[1]
         # the nodes' data from this rank's window (complete after the halo sum)
-        valid = nodes >= 0
-        li = np.where(valid, nodes // ny - w.ox, 0)
-        lj = np.where(valid, nodes % ny - w.oy, 0)
-        mass = np.where(valid, G[li, lj, 0], 0.0)
-        vel = np.where(valid[..., None], G[li, lj, field:field + 2], 0.0)
-        fixed = np.where(valid[..., None], w.bc_mask[li, lj].astype(bool), False)
+        mass = np.empty(nodes.shape)
+        vel = np.empty((*nodes.shape, 2))
+        fixed = np.empty((*nodes.shape, 2), dtype=np.bool_)
+        support_gather(nodes, G, w.ox, w.oy, ny, field, w.bc_mask, mass, vel, fixed)
         data = (ids, sup, nodes, weights, mass, vel, fixed)
         if solver.comm.Get_size() > 1:
             data = tuple(np.concatenate(parts) for parts in zip(*solver.comm.allgather(data)))
         ids, sup, nodes, weights, mass, vel, fixed = data
         if not len(ids):
             return
+        # the same rows in the same order on every rank count: by particle id
         order = np.argsort(ids, kind="stable")
-        sup, nodes, weights = sup[order], nodes[order], weights[order]
-        mass, vel, fixed = mass[order], vel[order], fixed[order]
-        valid = nodes >= 0
-        U, col = np.unique(nodes[valid], return_inverse=True)
-        n_rows = len(ids)
-        N = np.zeros((n_rows, len(U)))
-        rows = np.broadcast_to(np.arange(n_rows)[:, None], nodes.shape)[valid]
-        np.add.at(N, (rows, col), weights[valid])
-        m_U = np.zeros(len(U))
-        v_U = np.zeros((len(U), 2))
-        f_U = np.zeros((len(U), 2), dtype=bool)
-        m_U[col], v_U[col], f_U[col] = mass[valid], vel[valid], fixed[valid]
-        dv = np.zeros((len(U), 2))
-        J = np.zeros((len(U), 2, len(self.boundaries)))  # impulse per node, component, support
-        for d in range(2):
-            r = np.nonzero(self.hold[sup, d])[0]
-            if not len(r):
-                continue
-            Nd = N[r]
-            minv = np.where(f_U[:, d] | (m_U <= 0.0), 0.0, 1.0 / np.where(m_U > 0.0, m_U, 1.0))
-            A = (Nd * minv) @ Nd.T
-            rhs = Nd @ v_U[:, d] - self.vel[sup[r], d]
-            e, Q = np.linalg.eigh(A)
-            keep = e > RANK_TOLERANCE * max(e.max(), 0.0)
-            lam = Q[:, keep] @ ((Q[:, keep].T @ rhs) / e[keep])
-            contrib = Nd * lam[:, None]          # row p's share of N^T lambda at each node
-            dv[:, d] = -minv * contrib.sum(axis=0)
-            if impulse:
-                for b in range(len(self.boundaries)):
-                    J[:, d, b] = -np.where(minv > 0.0, contrib[sup[r] == b].sum(axis=0), 0.0)
+        U, dv, J = self.solve(sup[order], nodes[order], weights[order], mass[order], vel[order],
+                              fixed[order], self.hold, self.vel, len(self.boundaries), RANK_TOLERANCE)
         # correct the nodes of this window (owned and ghost)
         gi, gj = U // ny - w.ox, U % ny - w.oy
         here = (gi >= 0) & (gi < w.shape[0]) & (gj >= 0) & (gj < w.shape[1])
@@ -196,14 +169,15 @@ class HeldFaces:
         if field == 1:
             G[gi[here], gj[here], 3:5] += dv[here]
         if impulse:
-            self._account(solver, U, J, v_U + dv, here, gi, gj)
+            v_new = G[gi[here], gj[here], field:field + 2]
+            self._account(solver, U[here], J[here], v_new, gi[here], gj[here])
 
-    def _account(self, solver, U, J, v_new, here, gi, gj):
+    def _account(self, solver, U, J, v_new, gi, gj):
         """Reactions and work of the constraint impulses ``J`` over this rank's owned nodes."""
         axis, lo, hi = solver._owned_local
         k = gi if axis == 0 else gj
-        mine = here & (k >= lo) & (k < hi)
-        solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))
+        mine = (k >= lo) & (k < hi)
+        solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))   # J . v_new
         reactions = solver.reactions
         if reactions is None:
             return
