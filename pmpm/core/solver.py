@@ -26,7 +26,7 @@ from mpi4py import MPI
 
 from decomposition import alltoallv_fields, get_comm, wait_all
 from pmpm.core import kernels as K
-from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
+from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, check_boxes_hold
 from pmpm.physics.supports import HeldFaces
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow, choose_tile
@@ -112,6 +112,8 @@ class Solver:
                        if scene.loads.ground_motion else None)
         self.damping = scene.loads.damping or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
+        check_boxes_hold(scene.boundaries, self.grid, points["x"],
+                         ghost_width(cfg.shape_function, cfg.interpolation))
         # supports attached to a body hold its face's particles (None: the scene has none)
         self.supports = (HeldFaces(scene.boundaries, scene.bodies, points, self.grid)
                          if any(b.body is not None for b in scene.boundaries) else None)

@@ -13,14 +13,15 @@ kinetic energy, the projection in the nodal mass norm:
     A = N M^-1 N^T,   A lambda = N v - v_bc,   v <- v - M^-1 N^T lambda
 
 (M the lumped nodal masses; a node a box boundary fixes is not changed: its column is dropped,
-as if its mass were infinite). Where the rows are dependent (more held particles along the face than node rows under it, as
-with 4 particles per cell and cubic B-splines) A is singular but the system is consistent
-(v = v_bc satisfies it); the kernel (pmpm.core.kernels.support.support_solve) factorises A by
-Cholesky with diagonal pivoting and stops at the pivots below ``RANK_TOLERANCE`` of its largest
-diagonal (the dependent rows), which imposes every independent row exactly. Any solution lambda
-gives the same correction M^-1 N^T lambda (lambda's null-space part is N^T's). Nothing depends on where the face lies relative to the grid: on a grid edge, inside
-the grid, on or off the node lines the held particles get exactly the prescribed velocity, and
-since positions move with the same velocity, a fixed face stays where it is.
+as if its mass were infinite). Where the rows are dependent (more held particles along the face
+than node rows under it, as with 4 particles per cell and cubic B-splines) A is singular but
+the system is consistent (v = v_bc satisfies it); the kernel
+(pmpm.core.kernels.support.support_solve) factorises A by Cholesky with diagonal pivoting and
+stops at the pivots below ``RANK_TOLERANCE`` of its largest diagonal (the dependent rows),
+which imposes every independent row exactly. Nothing depends on where the face lies relative to
+the grid: on a grid edge, inside the grid, on or off the node lines the held particles get
+exactly the prescribed velocity, and since positions move with the same velocity, a fixed face
+stays where it is.
 
 The constraint's impulse on node i is J_i = -m_i (M^-1 N^T lambda)_i = -(N^T lambda)_i: the
 support's reaction (summed over the owned nodes into pmpm.results.reactions, as the nodal BCs'
