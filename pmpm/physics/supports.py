@@ -89,7 +89,12 @@ class HeldFaces:
         # hold[b, d]: support b prescribes component d, to velocity vel[b, d]
         self.hold = np.zeros((n, 2), dtype=bool)
         self.vel = np.zeros((n, 2))
-        ids, which, centroids = [], [], []
+        # which support holds each component of each held particle (by id): where two faces
+        # meet at a corner particle, each component goes to the later boundary that prescribes
+        # it, as for overlapping boxes
+        n_points = len(points["x"])
+        which = np.full((n_points, 2), -1, dtype=np.int32)
+        centroids = []
         for b, (k, bc) in enumerate(zip(self.index, self.boundaries)):
             for d in COMPONENTS[bc.type]:
                 self.hold[b, d] = True
@@ -98,17 +103,17 @@ class HeldFaces:
             if not len(layer):
                 raise ConfigError(f"boundary[{k}]", f"face {bc.face!r} of body {bc.body!r} holds no "
                                                     f"particle (the body has none in the grid)")
-            ids.append(layer.astype(np.int64))   # a particle's id is its point's index
-            which.append(np.full(len(layer), b, dtype=np.int32))
+            for d in COMPONENTS[bc.type]:
+                which[layer, d] = b
             centroids.append(points["x"][layer].mean(axis=0))
             logger.info("boundary %r: holds %d particle(s) of face %r of body %r", bc.name, len(layer),
                         bc.face, bc.body)
-        ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
-        which = np.concatenate(which) if which else np.zeros(0, dtype=np.int32)
-        if len(np.unique(ids)) != len(ids):
-            dup = ids[np.nonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0][0]]
-            raise ConfigError(f"boundary[{self.index[int(which[ids == dup][-1])]}]",
-                              "holds particles another attached boundary holds (two faces of one corner)")
+        ids = np.nonzero((which >= 0).any(axis=1))[0].astype(np.int64)   # a particle's id is its point's index
+        which = which[ids]
+        for b, k in enumerate(self.index):
+            if not (which == b).any():
+                raise ConfigError(f"boundary[{k}]", "holds nothing: the later attached boundaries "
+                                                    "prescribe every component of its particles")
         order = np.argsort(ids)
         self.ids, self.which = ids[order], which[order]
         #: default moment point of each support's reaction: the centroid of its held particles
@@ -118,9 +123,9 @@ class HeldFaces:
 
     # -- set-up -------------------------------------------------------------------------------
     def mark(self, particles):
-        """Give ``particles`` the field ``support``: the support index holding each (-1: free).
-        It travels with the particles (migration, sorting, checkpoints)."""
-        particles.add_field("support", (), np.int32, -1)
+        """Give ``particles`` the field ``support`` (n, 2): the support holding each component
+        (-1: free). It travels with the particles (migration, sorting, checkpoints)."""
+        particles.add_field("support", (2,), np.int32, -1)
         pos = np.searchsorted(self.ids, particles["id"])
         pos = np.minimum(pos, max(len(self.ids) - 1, 0))
         if len(self.ids):
@@ -131,7 +136,7 @@ class HeldFaces:
     def _local_rows(self, solver):
         """This rank's held particles' rows: (ids, support, nodes (n, R), weights (n, R))."""
         p, g = solver.particles, self.grid
-        idx = np.nonzero(p["support"] >= 0)[0]
+        idx = np.nonzero((p["support"] >= 0).any(axis=1))[0]
         shape = solver.shape
         nodes = np.empty((len(idx), row_width(shape)), dtype=np.int64)
         weights = np.empty((len(idx), row_width(shape)))
@@ -162,7 +167,7 @@ class HeldFaces:
         # the same rows in the same order on every rank count: by particle id
         order = np.argsort(ids, kind="stable")
         U, dv, J = self.solve(sup[order], nodes[order], weights[order], mass[order], vel[order],
-                              fixed[order], self.hold, self.vel, len(self.boundaries), RANK_TOLERANCE)
+                              fixed[order], self.vel, len(self.boundaries), RANK_TOLERANCE)
         # correct the nodes of this window (owned and ghost)
         gi, gj = U // ny - w.ox, U % ny - w.oy
         here = (gi >= 0) & (gi < w.shape[0]) & (gj >= 0) & (gj < w.shape[1])
@@ -199,12 +204,13 @@ class HeldFaces:
         particle transfer); the momentum this removes is the support's, added to its reaction
         by the owner of each particle."""
         p = solver.particles
-        idx = np.nonzero(p["support"] >= 0)[0]
+        sup = p["support"]
+        idx = np.nonzero((sup >= 0).any(axis=1))[0]
         if not len(idx):
             return
-        sup = p["support"][idx]
-        hold = self.hold[sup]
-        target = np.where(hold, self.vel[sup], p["v"][idx])
+        sup = sup[idx]
+        held = sup >= 0
+        target = np.where(held, self.vel[np.maximum(sup, 0), [0, 1]], p["v"][idx])
         change = p["m"][idx, None] * (target - p["v"][idx])
         p["v"][idx] = target
         reactions = solver.reactions
@@ -215,7 +221,8 @@ class HeldFaces:
             if k_bc not in reactions.index:
                 continue
             row = reactions.index.index(k_bc)
-            mine = sup == b
-            reactions.sums[row, 0] += change[mine, 0].sum()
-            reactions.sums[row, 1] += change[mine, 1].sum()
-            reactions.sums[row, 2] += np.sum(x[mine, 0] * change[mine, 1] - x[mine, 1] * change[mine, 0])
+            cx = np.where(sup[:, 0] == b, change[:, 0], 0.0)
+            cy = np.where(sup[:, 1] == b, change[:, 1], 0.0)
+            reactions.sums[row, 0] += cx.sum()
+            reactions.sums[row, 1] += cy.sum()
+            reactions.sums[row, 2] += np.sum(x[:, 0] * cy - x[:, 1] * cx)

@@ -48,7 +48,7 @@ def _run(c):
             e = s.energies()
             energy.append([e["kinetic"], e["internal_work"], e["external_work"]])
             reaction.append(s.reactions.take(s.t, s.decomp.allreduce_sum)[0])
-    held = np.count_nonzero(s.particles["support"] >= 0)
+    held = np.count_nonzero((s.particles["support"] >= 0).any(axis=1))
     fields = c.gather({k: s.particles[k] for k in ("id", "x", "v")}, root=0)
     holders = c.allgather(held)
     out = None

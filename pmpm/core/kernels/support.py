@@ -161,12 +161,12 @@ def _pivoted_cholesky_solve(A, r, tol):
 
 
 @nb.njit(cache=True)
-def support_solve(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_supports, tol):
+def support_solve(sup, nodes, weights, mass, vel, fixed, vbc, n_supports, tol):
     """The M-norm projection of the nodal velocities onto N v = v_bc (pmpm.physics.supports).
 
-    Rows are the held particles in the order given (``sup`` their support, ``nodes`` /
-    ``weights`` their entries, ``mass`` / ``vel`` / ``fixed`` the entries' node data);
-    ``hold[b, d]``: support b prescribes component d, to ``vbc[b, d]``. Returns the distinct
+    Rows are the held particles in the order given (``sup[q, d]`` the support that prescribes
+    component d of particle q, -1 none, ``nodes`` / ``weights`` their entries, ``mass`` /
+    ``vel`` / ``fixed`` the entries' node data); support b prescribes ``vbc[b, d]``. Returns the distinct
     nodes U (sorted global numbers), the velocity corrections dv (len(U), 2) and the constraint
     impulses J (len(U), 2, n_supports), J = -N^T lambda per support (0 at box-fixed nodes)."""
     n, R = nodes.shape
@@ -207,7 +207,7 @@ def support_solve(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_supports, 
         rows = np.zeros(n, dtype=np.int64)
         nr = 0
         for q in range(n):
-            if hold[sup[q], d]:
+            if sup[q, d] >= 0:
                 rows[nr] = q
                 nr += 1
         if nr == 0:
@@ -218,7 +218,7 @@ def support_solve(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_supports, 
         rhs = np.zeros(nr)
         for a in range(nr):
             p = rows[a]
-            s = -vbc[sup[p], d]
+            s = -vbc[sup[p, d], d]
             for k in range(R):
                 j = col[p, k]
                 if j >= 0:
@@ -241,7 +241,7 @@ def support_solve(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_supports, 
                 if j >= 0 and minv[j] > 0.0:
                     share = weights[p, k] * lam[a]
                     dv[j, d] -= minv[j] * share
-                    J[j, d, sup[p]] -= share
+                    J[j, d, sup[p, d]] -= share
     return U, dv, J
 
 
@@ -266,7 +266,7 @@ def _pivoted_solve_reference(A, r, tol):
     return x
 
 
-def support_solve_reference(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_supports, tol):
+def support_solve_reference(sup, nodes, weights, mass, vel, fixed, vbc, n_supports, tol):
     """The NumPy twin of ``support_solve``: dense N, A = N M^-1 N^T by matrix products, the
     same pivoted choice of independent rows (``_pivoted_solve_reference``)."""
     valid = nodes >= 0
@@ -282,16 +282,16 @@ def support_solve_reference(sup, nodes, weights, mass, vel, fixed, hold, vbc, n_
     dv = np.zeros((len(U), 2))
     J = np.zeros((len(U), 2, n_supports))
     for d in range(2):
-        r = np.nonzero(hold[sup, d])[0]
+        r = np.nonzero(sup[:, d] >= 0)[0]
         if not len(r):
             continue
         Nd = N[r]
         minv = np.where(f_U[:, d] | (m_U <= 0.0), 0.0, 1.0 / np.where(m_U > 0.0, m_U, 1.0))
         A = (Nd * minv) @ Nd.T
-        rhs = Nd @ v_U[:, d] - vbc[sup[r], d]
+        rhs = Nd @ v_U[:, d] - vbc[sup[r, d], d]
         lam = _pivoted_solve_reference(A, rhs, tol)
         contrib = Nd * lam[:, None]
         dv[:, d] = -minv * contrib.sum(axis=0)
         for b in range(n_supports):
-            J[:, d, b] = -np.where(minv > 0.0, contrib[sup[r] == b].sum(axis=0), 0.0)
+            J[:, d, b] = -np.where(minv > 0.0, contrib[sup[r, d] == b].sum(axis=0), 0.0)
     return U, dv, J
