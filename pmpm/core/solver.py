@@ -43,7 +43,6 @@ from pmpm.results.sections import make_cuts
 from pmpm.scene.limits import check_memory, check_time_step
 
 __all__ = ["Solver", "needs_deformation_gradient"]
-MOM_FIELD = K.MOM
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -284,7 +283,7 @@ class Solver:
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
         if self.supports is not None:
-            self.supports.project(self, MOM_FIELD, impulse=True)
+            self.supports.project(self, K.MOM, impulse=True)
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
@@ -301,8 +300,8 @@ class Solver:
         vmax, bad = K.g2p_velocity(p["x"], p["m"], p["v"], self.scene.solver.pic_blend,
                                    *self._geometry(), remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
-        if self.supports is not None:
-            self.supports.hold_particles(self)
+        if self.supports is not None:   # (the MUSL re-map above carried their FLIP velocity; the
+            self.supports.hold_particles(self)   # re-mapped velocity is projected in grid_velocity)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
