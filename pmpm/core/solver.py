@@ -26,7 +26,7 @@ from mpi4py import MPI
 
 from decomposition import alltoallv_fields, get_comm, wait_all
 from pmpm.core import kernels as K
-from pmpm.physics.boundary import apply_boundary_masks, check_boundaries
+from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, check_boxes_hold
 from pmpm.physics.supports import HeldFaces
 from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow, choose_tile
@@ -45,7 +45,6 @@ from pmpm.results.sections import make_cuts
 from pmpm.scene.limits import check_memory, check_time_step
 
 __all__ = ["Solver", "needs_deformation_gradient", "numerical_loss"]
-MOM_FIELD = K.MOM
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -143,6 +142,8 @@ class Solver:
         mass_part = self.rayleigh.a0 if self.rayleigh is not None else scene.loads.damping
         self.damping = mass_part or None  # None compiles the damping out
         points = place_points(scene, self.grid, self.materials, self.labels)
+        check_boxes_hold(scene.boundaries, self.grid, points["x"],
+                         ghost_width(cfg.shape_function, cfg.interpolation))
         # supports attached to a body hold its face's particles (None: the scene has none)
         self.supports = (HeldFaces(scene.boundaries, scene.bodies, points, self.grid)
                          if any(b.body is not None for b in scene.boundaries) else None)
@@ -330,7 +331,7 @@ class Solver:
         self.damping_work += damped
         self.external_work += reactions  # supports are external: their work enters the balance
         if self.supports is not None:
-            self.supports.project(self, MOM_FIELD, impulse=True)
+            self.supports.project(self, K.MOM, impulse=True)
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
@@ -347,8 +348,8 @@ class Solver:
         self._dx = self._scratch("_dx_buf", (p.n, 2))
         vmax, bad = self.transfer.g2p(self, remap)
         self._vmax_local, self._bad_local = vmax, bad
-        if self.supports is not None:
-            self.supports.hold_particles(self)
+        if self.supports is not None:   # (the MUSL re-map above carried their FLIP velocity; the
+            self.supports.hold_particles(self)   # re-mapped velocity is projected in grid_velocity)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does

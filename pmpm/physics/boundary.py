@@ -18,7 +18,7 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries", "select_nodes", "COMPONENTS", "FACES"]
+__all__ = ["apply_boundary_masks", "check_boundaries", "check_boxes_hold", "select_nodes", "COMPONENTS", "FACES"]
 logger = logging.getLogger(__name__)
 
 #: velocity components each boundary type prescribes
@@ -43,6 +43,38 @@ def check_boundaries(boundaries, grid):
     for k, bc in enumerate(boundaries):
         if bc.body is None and not _select(X, Y, bc, 1e-6 * grid.h).any():
             raise ConfigError(f"boundary[{k}]", "box selects no grid node")
+
+
+def check_boxes_hold(boundaries, grid, x, reach):
+    """Refuse a box support that would hold nothing: one whose nodes all lie inside the grid
+    (none on its edge) and that no particle at ``x`` reaches at the start (a particle in cell c
+    reaches nodes c - reach + 1 .. c + reach per axis). A node support acts only on material
+    over it, and the grid has no memory between steps, so such a box constrains nothing unless
+    material happens to come to it; on a grid edge it is a floor or a wall and may wait for it."""
+    boxes = [(k, bc) for k, bc in enumerate(boundaries) if bc.body is None]
+    if not boxes:
+        return
+    near = np.zeros(grid.nodes, dtype=bool)
+    cells = np.floor((x - grid.origin) * grid.inv_h).astype(np.int64)
+    hit = np.zeros(grid.cells, dtype=bool)
+    hit[np.clip(cells[:, 0], 0, grid.cells[0] - 1), np.clip(cells[:, 1], 0, grid.cells[1] - 1)] = True
+    for di in range(-reach + 1, reach + 1):
+        for dj in range(-reach + 1, reach + 1):
+            # near[c + d] |= hit[c] for the offsets a particle's stencil covers
+            i0, i1 = max(0, di), min(grid.nodes[0], grid.cells[0] + di)
+            j0, j1 = max(0, dj), min(grid.nodes[1], grid.cells[1] + dj)
+            near[i0:i1, j0:j1] |= hit[i0 - di:i1 - di, j0 - dj:j1 - dj]
+    i = np.arange(grid.nodes[0])
+    j = np.arange(grid.nodes[1])
+    X, Y = np.broadcast_arrays(*grid.node_coords(i[:, None], j[None, :]))
+    edge = np.zeros(grid.nodes, dtype=bool)
+    edge[[0, -1], :] = edge[:, [0, -1]] = True
+    for k, bc in boxes:
+        sel = _select(X, Y, bc, 1e-6 * grid.h)
+        if sel.any() and not (sel & edge).any() and not (sel & near).any():
+            raise ConfigError(f"boundary[{k}]", "box holds nothing: it lies inside the grid and no "
+                                                "material reaches its nodes (to hold a body's face "
+                                                "anywhere, attach the support: body = ..., face = ...)")
 
 
 def select_nodes(window, bc):

