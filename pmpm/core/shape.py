@@ -630,7 +630,7 @@ def _make_boxes(interior, pad, K):
             b = min(min(s0, s1), min(s2, s3))
             e = max(max(s0, s1), max(s2, s3))
             start[q] = np.int64(b)
-            ok[q] = 1.0 if (e - b <= 1.0) & (b >= lo) & (b >= 0.0) & (e <= hi) else 0.0
+            ok[q] = 1.0 + (e - b) if (e - b <= 1.0) & (b >= lo) & (b >= 0.0) & (e <= hi) else 0.0
         for c in range(4):
             for q in range(nq):
                 s, w = interior(C[c, q])

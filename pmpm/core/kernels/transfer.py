@@ -479,7 +479,7 @@ def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
     tag = shape[0]
     K = stencil(tag)
     B = _cpdi_buffers(tag)
-    GV, BI, BJ, UX, UY, OK = B[1], B[2], B[3], B[4], B[5], B[6]
+    GV, BI, BJ, UX, UY, OK, OKX, OKY = B[1], B[2], B[3], B[4], B[5], B[6], B[7], B[8]
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
@@ -507,9 +507,9 @@ def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                 ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
                 i0 = BI[q] - ox
                 j0 = BJ[q] - oy
-                for a in range(K + 1):
+                for a in range(K - 1 + int(OKX[q])):
                     u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
-                    for b in range(K + 1):
+                    for b in range(K - 1 + int(OKY[q])):
                         n0 = u0 * UY[0, b, q]
                         n1 = u1 * UY[1, b, q]
                         n2 = u2 * UY[2, b, q]
@@ -542,7 +542,7 @@ def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, 
     tag = shape[0]
     K = stencil(tag)
     B = _cpdi_buffers(tag)
-    BI, BJ, UX, UY, OK = B[2], B[3], B[4], B[5], B[6]
+    BI, BJ, UX, UY, OK, OKX, OKY = B[2], B[3], B[4], B[5], B[6], B[7], B[8]
     WB = np.empty((K + 1, K + 1))   # a particle's box weights (times 4)
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
@@ -558,9 +558,9 @@ def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, 
                 dvy = 0.0
                 i0 = BI[q] - ox
                 j0 = BJ[q] - oy
-                for a in range(K + 1):
+                for a in range(K - 1 + int(OKX[q])):
                     u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
-                    for b in range(K + 1):
+                    for b in range(K - 1 + int(OKY[q])):
                         w = (u0 * UY[0, b, q] + u1 * UY[1, b, q]) + (u2 * UY[2, b, q] + u3 * UY[3, b, q])
                         WB[a, b] = w   # for the re-map
                         ii = i0 + a
@@ -592,8 +592,8 @@ def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, 
                 if OK[q]:
                     i0 = BI[q] - ox
                     j0 = BJ[q] - oy
-                    for a in range(K + 1):
-                        for b in range(K + 1):
+                    for a in range(K - 1 + int(OKX[q])):
+                        for b in range(K - 1 + int(OKY[q])):
                             w = 0.25 * WB[a, b]
                             G[i0 + a, j0 + b, 5] += w * mvx
                             G[i0 + a, j0 + b, 6] += w * mvy
@@ -612,7 +612,7 @@ def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, 
     tag = shape[0]
     K = stencil(tag)
     B = _cpdi_buffers(tag)
-    GV, BI, BJ, UX, UY, OK = B[1], B[2], B[3], B[4], B[5], B[6]
+    GV, BI, BJ, UX, UY, OK, OKX, OKY = B[1], B[2], B[3], B[4], B[5], B[6], B[7], B[8]
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
@@ -630,9 +630,9 @@ def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, 
                     ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
                     i0 = BI[q] - ox
                     j0 = BJ[q] - oy
-                    for a in range(K + 1):
+                    for a in range(K - 1 + int(OKX[q])):
                         u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
-                        for b in range(K + 1):
+                        for b in range(K - 1 + int(OKY[q])):
                             d0 = u0 * UY[0, b, q] - u2 * UY[2, b, q]
                             d1 = u1 * UY[1, b, q] - u3 * UY[3, b, q]
                             dnx = d0 * ax + d1 * bx
