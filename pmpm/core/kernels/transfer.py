@@ -504,7 +504,12 @@ def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                 syy = c0 * stress[p, 1]
                 sxy = c0 * stress[p, 2]
             if OK[q]:
+                # -V sigma grad w_i = (n_1 - n_3) (-V sigma a/V) + (n_2 - n_4) (-V sigma b/V)
                 ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
+                tax = sxx * ax + sxy * ay
+                tay = sxy * ax + syy * ay
+                tbx = sxx * bx + sxy * by
+                tby = sxy * bx + syy * by
                 i0 = BI[q] - ox
                 j0 = BJ[q] - oy
                 for a in range(K - 1 + int(OKX[q])):
@@ -524,10 +529,8 @@ def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                         if with_force:
                             d0 = n0 - n2
                             d1 = n1 - n3
-                            dnx = d0 * ax + d1 * bx
-                            dny = d0 * ay + d1 * by
-                            G[ii, jj, 3] += w * fx + sxx * dnx + sxy * dny
-                            G[ii, jj, 4] += w * fy + sxy * dnx + syy * dny
+                            G[ii, jj, 3] += w * fx + d0 * tax + d1 * tbx
+                            G[ii, jj, 4] += w * fy + d0 * tay + d1 * tby
                 continue
             _p2g_corners(G, q, K, B, ox, oy, mp, mvx, mvy, fx, fy, sxx, syy, sxy,
                          v is not None, with_force)
@@ -627,22 +630,29 @@ def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, 
                 lyx = 0.0
                 lyy = 0.0
                 if OK[q]:
-                    ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
+                    # L = sum_i v_i (x) [(n_1 - n_3) a/V + (n_2 - n_4) b/V]: the two sums first
                     i0 = BI[q] - ox
                     j0 = BJ[q] - oy
+                    xa = 0.0
+                    xb = 0.0
+                    ya = 0.0
+                    yb = 0.0
                     for a in range(K - 1 + int(OKX[q])):
                         u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
                         for b in range(K - 1 + int(OKY[q])):
                             d0 = u0 * UY[0, b, q] - u2 * UY[2, b, q]
                             d1 = u1 * UY[1, b, q] - u3 * UY[3, b, q]
-                            dnx = d0 * ax + d1 * bx
-                            dny = d0 * ay + d1 * by
                             gvx = G[i0 + a, j0 + b, vel_field]
                             gvy = G[i0 + a, j0 + b, vel_field + 1]
-                            lxx += gvx * dnx
-                            lxy += gvx * dny
-                            lyx += gvy * dnx
-                            lyy += gvy * dny
+                            xa += gvx * d0
+                            xb += gvx * d1
+                            ya += gvy * d0
+                            yb += gvy * d1
+                    ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
+                    lxx = xa * ax + xb * bx
+                    lxy = xa * ay + xb * by
+                    lyx = ya * ax + yb * bx
+                    lyy = ya * ay + yb * by
                 else:
                     lxx, lxy, lyx, lyy = _gradient_corners(G, vel_field, q, K, B, ox, oy)
                 strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
