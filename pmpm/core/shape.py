@@ -49,8 +49,9 @@ b = (r1y + r2y, -r1x - r2x), V = 4 (r1 x r2) (the domain's area, > 0 while det F
 sum_c x_c (x) g_c = I, the gradient of a linear field is exact, and the weights reproduce
 x_p (the mean of the corners). The transfer kernels therefore treat the corners as four
 sub-points of the basis (``cpdi_corners``): no basis gradient is used. A particle touches the
-union of its corners' supports: 4 x K^2 node visits (64 with cubic B-splines, 16 with linear
-hats). Grid edges: a corner outside the grid is clamped onto it per axis; each corner's basis
+union of its corners' supports; while that fits one box of K + 1 nodes per axis (``cpdi_boxes``)
+the kernels visit each of its nodes once (at most 25 visits with cubic B-splines), else each
+corner's K^2 nodes (4 x 16 = 64). Grid edges: a corner outside the grid is clamped onto it per axis; each corner's basis
 then sums to 1 (the boundary-modified B-splines do on [0, n]), so the partition of unity holds
 for every particle, as for GIMP, and sum_c g_c = 0 keeps the gradients' sum zero; linear
 completeness holds where no corner is clamped. The kernels receive ``(tag, domain, F, escape)``,

@@ -14,7 +14,8 @@ chosen by the type of ``shape`` when numba compiles ``p2g``, ``g2p_velocity`` an
 ``g2p_kinematics`` (the other scenes' machine code is unchanged): a block's four corners are
 evaluated as sub-points of the basis, and each particle scatters m/4, m v/4 and
 f_c = -V sigma g_c + f_ext/4 at each corner with the corner's weights, gathers the mean of the
-corners' velocities and L = sum_c v(x_c) (x) g_c. A corner whose support leaves the rank's
+corners' velocities and L = sum_c v(x_c) (x) g_c; the corners' weights are merged onto one node
+box per particle first where they fit one (see the CPDI section below). A corner whose support leaves the rank's
 window is dropped (nothing is written outside it) and counted in ``escape``.
 """
 import math
