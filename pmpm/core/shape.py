@@ -557,8 +557,8 @@ def cpdi_corners(domain, F, p, sx, sy, ncx, ncy):
 # differ by at most one and their K-node supports fit one box of K + 1 nodes. ``cpdi_boxes``
 # evaluates the basis at a block's corners (no derivatives: CPDI's gradient comes from the
 # corners' weights) and pads each corner's K weights onto its particle's box, branch-free so
-# the loop vectorises; the transfer kernels then visit each box node once ((K + 1)^2 = 25
-# nodes with cubic B-splines instead of 4 K^2 = 64). A particle that does not fit (a corner's
+# the loop vectorises; the transfer kernels then visit each box node once (K or K + 1 nodes per
+# axis, at most 25 with cubic B-splines, instead of 4 K^2 = 64). A particle that does not fit (a corner's
 # support on a boundary-modified node, corners more than one first node apart, or the box
 # leaving the grid window) is flagged, and the kernels take the per-corner path for it.
 
@@ -643,8 +643,9 @@ def cpdi_boxes(tag, C, nq, n, lo, width, start, U, ok):
     """One axis of a block's CPDI node boxes. ``C[c, q]``: corner c of particle q along the axis
     (cell units, on the grid [0, n]); ``lo``, ``width``: the grid window's nodes along it.
     Writes ``start[q]``, the box's first node, ``U[c, a, q]`` (a = 0 .. K), corner c's basis
-    weight of box node start + a, and ``ok[q]``: 1.0 when particle q fits its box along this
-    axis, else 0.0 (see above; then start and U are not to be used)."""
+    weight of box node start + a, and ``ok[q]``: 0.0 when particle q does not fit a box along
+    this axis (see above; then start and U are not to be used), else 1.0 plus the spread of its
+    corners' first nodes (0 or 1): the box has K - 1 + ok[q] nodes along the axis."""
     raise NotImplementedError  # only called from jitted code (the overload below)
 
 
