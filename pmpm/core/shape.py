@@ -49,8 +49,9 @@ b = (r1y + r2y, -r1x - r2x), V = 4 (r1 x r2) (the domain's area, > 0 while det F
 sum_c x_c (x) g_c = I, the gradient of a linear field is exact, and the weights reproduce
 x_p (the mean of the corners). The transfer kernels therefore treat the corners as four
 sub-points of the basis (``cpdi_corners``): no basis gradient is used. A particle touches the
-union of its corners' supports: 4 x K^2 node visits (64 with cubic B-splines, 16 with linear
-hats). Grid edges: a corner outside the grid is clamped onto it per axis; each corner's basis
+union of its corners' supports; while that fits one box of K + 1 nodes per axis (``cpdi_boxes``)
+the kernels visit each of its nodes once (at most 25 visits with cubic B-splines), else each
+corner's K^2 nodes (4 x 16 = 64). Grid edges: a corner outside the grid is clamped onto it per axis; each corner's basis
 then sums to 1 (the boundary-modified B-splines do on [0, n]), so the partition of unity holds
 for every particle, as for GIMP, and sum_c g_c = 0 keeps the gradients' sum zero; linear
 completeness holds where no corner is clamped. The kernels receive ``(tag, domain, F, escape)``,
@@ -69,7 +70,7 @@ __all__ = ["SHAPES", "SHAPE_TAGS", "INTERPOLATIONS", "weights", "particle_weight
            "block_domain", "stencil", "BLOCK", "linear", "quadratic", "cubic", "cubic_gimp",
            "block_coordinates", "ghost_width", "min_cells", "shape_argument", "MAX_HALF_LENGTH",
            "GIMP_INTERPOLATIONS", "cpdi_corners", "corner_count", "corner_point", "basis_of",
-           "corner_share", "CPDI_REACH", "is_cpdi"]
+           "corner_share", "CPDI_REACH", "is_cpdi", "cpdi_boxes"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -547,6 +548,114 @@ def cpdi_corners(domain, F, p, sx, sy, ncx, ncy):
     cy = (_onto(sy - r1y - r2y, ncy), _onto(sy + r1y - r2y, ncy),
           _onto(sy + r1y + r2y, ncy), _onto(sy - r1y + r2y, ncy))
     return cx, cy, (r1y - r2y) * inv, (r2x - r1x) * inv, (r1y + r2y) * inv, -(r1x + r2x) * inv
+
+
+# -- CPDI: the four corners' weights on one node box, a block at a time ----------------------
+#
+# A particle's corners lie within a fraction of a cell of each other while its domain is small
+# (4 particles per cell: half-lengths of a quarter cell), so along each axis their first nodes
+# differ by at most one and their K-node supports fit one box of K + 1 nodes. ``cpdi_boxes``
+# evaluates the basis at a block's corners (no derivatives: CPDI's gradient comes from the
+# corners' weights) and pads each corner's K weights onto its particle's box, branch-free so
+# the loop vectorises; the transfer kernels then visit each box node once (K or K + 1 nodes per
+# axis, at most 25 with cubic B-splines, instead of 4 K^2 = 64). A particle that does not fit (a corner's
+# support on a boundary-modified node, corners more than one first node apart, or the box
+# leaving the grid window) is flagged, and the kernels take the per-corner path for it.
+
+@nb.njit(cache=True, inline="always")
+def _interior_linear(t):
+    c = math.floor(t)
+    f = t - c
+    return c, (1.0 - f, f)
+
+
+@nb.njit(cache=True, inline="always")
+def _interior_quadratic(t):
+    c = math.floor(t + 0.5)
+    f = t - c
+    a = 0.5 - f
+    b = 0.5 + f
+    return c - 1.0, (0.5 * a * a, 0.75 - f * f, 0.5 * b * b)
+
+
+@nb.njit(cache=True, inline="always")
+def _interior_cubic(t):
+    c = math.floor(t)
+    f = t - c
+    e = 1.0 - f
+    f2 = f * f
+    f3 = f2 * f
+    return c - 1.0, (e * e * e * (1.0 / 6.0), 0.5 * f3 - f2 + 2.0 / 3.0,
+                     (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) * (1.0 / 6.0), f3 * (1.0 / 6.0))
+
+
+@nb.njit(cache=True, inline="always")
+def _pad2(U, c, q, d, w):
+    """U[c, a, q] = corner c's weight of box node a: w[a - d] (zero off its support; d = 0, 1).
+    One function per stencil width, written out: a loop over the tuple would not vectorise."""
+    e = 1.0 - d
+    U[c, 0, q] = e * w[0]
+    U[c, 1, q] = e * w[1] + d * w[0]
+    U[c, 2, q] = d * w[1]
+
+
+@nb.njit(cache=True, inline="always")
+def _pad3(U, c, q, d, w):
+    e = 1.0 - d
+    U[c, 0, q] = e * w[0]
+    U[c, 1, q] = e * w[1] + d * w[0]
+    U[c, 2, q] = e * w[2] + d * w[1]
+    U[c, 3, q] = d * w[2]
+
+
+@nb.njit(cache=True, inline="always")
+def _pad4(U, c, q, d, w):
+    e = 1.0 - d
+    U[c, 0, q] = e * w[0]
+    U[c, 1, q] = e * w[1] + d * w[0]
+    U[c, 2, q] = e * w[2] + d * w[1]
+    U[c, 3, q] = e * w[3] + d * w[2]
+    U[c, 4, q] = d * w[3]
+
+
+def _make_boxes(interior, pad, K):
+    # two passes over the block, so that each loop has few enough memory streams for the
+    # compiler to vectorise it (one loop over all four corners' 20 box weights did not)
+    def boxes(tag, C, nq, n, lo, width, start, U, ok):
+        hi = min(n - (K - 1.0), lo + width - (K + 1.0))   # the last first node of a box
+        for q in range(nq):
+            s0 = interior(C[0, q])[0]
+            s1 = interior(C[1, q])[0]
+            s2 = interior(C[2, q])[0]
+            s3 = interior(C[3, q])[0]
+            b = min(min(s0, s1), min(s2, s3))
+            e = max(max(s0, s1), max(s2, s3))
+            start[q] = np.int64(b)
+            ok[q] = 1.0 + (e - b) if (e - b <= 1.0) & (b >= lo) & (b >= 0.0) & (e <= hi) else 0.0
+        for c in range(4):
+            for q in range(nq):
+                s, w = interior(C[c, q])
+                pad(U, c, q, min(max(s - start[q], 0.0), 1.0), w)
+    return boxes
+
+
+def cpdi_boxes(tag, C, nq, n, lo, width, start, U, ok):
+    """One axis of a block's CPDI node boxes. ``C[c, q]``: corner c of particle q along the axis
+    (cell units, on the grid [0, n]); ``lo``, ``width``: the grid window's nodes along it.
+    Writes ``start[q]``, the box's first node, ``U[c, a, q]`` (a = 0 .. K), corner c's basis
+    weight of box node start + a, and ``ok[q]``: 0.0 when particle q does not fit a box along
+    this axis (see above; then start and U are not to be used), else 1.0 plus the spread of its
+    corners' first nodes (0 or 1): the box has K - 1 + ok[q] nodes along the axis."""
+    raise NotImplementedError  # only called from jitted code (the overload below)
+
+
+_BOXES = {2: _make_boxes(_interior_linear, _pad2, 2), 3: _make_boxes(_interior_quadratic, _pad3, 3),
+          4: _make_boxes(_interior_cubic, _pad4, 4)}
+
+
+@overload(cpdi_boxes)
+def _cpdi_boxes_overload(tag, C, nq, n, lo, width, start, U, ok):
+    return _BOXES[tag.count]
 
 
 # The per-particle kernels (point loads, support marking) visit a particle's sub-points: the

@@ -218,3 +218,59 @@ def test_attached_supports_mark_the_nodes_any_corner_reaches(name):
     # a node is reached when a corner's weight is nonzero; the mean N can vanish only where all
     # four do (the B-splines are non-negative)
     np.testing.assert_array_equal(mask.astype(bool), (N > 0).any(axis=0))
+
+
+def _box_spread(p):
+    """Per particle, the largest difference of its corners' cells along either axis (a particle
+    whose corners' supports do not share one (K + 1)-node box takes the kernels' per-corner path)."""
+    s = (p["x"] - ORIGIN) / H
+    F, d = p["F"], p["domain"]
+    r1 = np.stack([F[:, 0], F[:, 2]], 1) * d[:, :1]
+    r2 = np.stack([F[:, 1], F[:, 3]], 1) * d[:, 1:]
+    c = np.floor(np.clip(np.stack([s - r1 - r2, s + r1 - r2, s + r1 + r2, s - r1 + r2]), 0, CELLS))
+    return (c.max(axis=0) - c.min(axis=0)).max(axis=1)
+
+
+@pytest.mark.parametrize("name", ["linear", "quadratic", "cubic"])
+def test_both_paths_match_the_twin_when_domains_stretch_past_a_cell(name):
+    """Domains stretched up to 3 times, inside the grid: some particles fit one node box, others
+    (corners two or more cells apart) take the per-corner path; every transfer matches the twin."""
+    rng = np.random.default_rng(11)
+    p = _particles(200, seed=4, interior=True)
+    th = rng.uniform(-np.pi, np.pi, 200)
+    lam = rng.uniform(0.5, 3.0, (200, 2))
+    c, sn = np.cos(th), np.sin(th)
+    p["F"] = np.stack([c * lam[:, 0], -sn * lam[:, 1], sn * lam[:, 0], c * lam[:, 1],
+                       np.ones(200)], axis=1)      # a rotation times a stretch up to 3
+    spread = _box_spread(p)
+    assert (spread <= 1).sum() > 20 and (spread >= 2).sum() > 20     # both paths are exercised
+    order = ORDERS[name]
+    gravity = np.array([0.3, -9.8])
+    G = _grid()
+    K.p2g(p["x"], p["m"], p["v"], p["vol"], p["stress"], gravity, None, None, None,
+          G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], _shape(name, p))
+    mass, mom, force = p2g_reference(order, p["x"], p["m"], p["v"], p["vol"], p["stress"],
+                                     p["m"][:, None] * gravity, ORIGIN, H, CELLS, p["domain"], p["F"])
+    np.testing.assert_allclose(G[..., 0], mass, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(G[..., 1:3], mom, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(G[..., 3:5], force, rtol=1e-10, atol=1e-10)
+    G[..., 1:7] = rng.normal(size=G[..., 1:7].shape)
+    vel, dvel = G[..., 1:3].copy(), G[..., 3:5].copy()
+    v, dx = p["v"].copy(), np.empty_like(p["v"])
+    G5 = G[..., 5:7].copy()
+    K.g2p_velocity(p["x"], p["m"], v, 0.2, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1],
+                   _shape(name, p), True, dx, 0.5)
+    ref = g2p_velocity_reference(order, p["x"], p["v"], vel, dvel, 0.2, ORIGIN, H, CELLS,
+                                 p["domain"], p["F"])
+    np.testing.assert_allclose(v, ref, rtol=1e-12, atol=1e-12)
+    N, _ = cpdi_basis_matrix(order, p["x"], ORIGIN, H, CELLS, p["domain"], p["F"])
+    np.testing.assert_allclose(G[..., 5:7] - G5, np.einsum("pij,p,pd->ijd", N, p["m"], v), atol=1e-12)
+    n = len(p["m"])
+    F0, vol0 = p["F"].copy(), p["vol"].copy()
+    de, dq, vol = np.empty((n, 3)), np.empty((n, 2)), p["vol"].copy()
+    K.g2p_kinematics(p["x"], p["m"], vol, None, de, None, p["F"], vol0, dq, 5, None, 1e-3,
+                     None, None, None, None, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], _shape(name, p))
+    de_r, _, F_r, vol_r, _ = g2p_deformation_reference(order, p["x"], G[..., 5:7], F0, vol0, 1e-3,
+                                                       ORIGIN, H, CELLS, p["domain"])
+    np.testing.assert_allclose(de, de_r, atol=1e-12)
+    np.testing.assert_allclose(p["F"], F_r, atol=1e-12)

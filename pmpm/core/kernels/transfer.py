@@ -14,7 +14,8 @@ chosen by the type of ``shape`` when numba compiles ``p2g``, ``g2p_velocity`` an
 ``g2p_kinematics`` (the other scenes' machine code is unchanged): a block's four corners are
 evaluated as sub-points of the basis, and each particle scatters m/4, m v/4 and
 f_c = -V sigma g_c + f_ext/4 at each corner with the corner's weights, gathers the mean of the
-corners' velocities and L = sum_c v(x_c) (x) g_c. A corner whose support leaves the rank's
+corners' velocities and L = sum_c v(x_c) (x) g_c; the corners' weights are merged onto one node
+box per particle first where they fit one (see the CPDI section below). A corner whose support leaves the rank's
 window is dropped (nothing is written outside it) and counted in ``escape``.
 """
 import math
@@ -24,7 +25,7 @@ import numpy as np
 
 from numba.extending import overload
 
-from pmpm.core.shape import (BLOCK, block_coordinates, block_domain, block_weights, cpdi_corners,
+from pmpm.core.shape import (BLOCK, block_coordinates, block_domain, block_weights, cpdi_boxes, cpdi_corners,
                              is_cpdi, stencil)
 
 __all__ = ["p2g", "g2p_velocity", "g2p_kinematics"]
@@ -294,39 +295,66 @@ def _g2p_kinematics_point(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx,
     return work
 
 
-# -- CPDI: four corners per particle ----------------------------------------------------------
+# -- CPDI: four corners per particle, merged onto one node box ---------------------------------
+#
+# The kernels evaluate a block's corners and their node boxes (``cpdi_boxes``,
+# pmpm/core/shape.py), then visit each particle's (K + 1)^2 box nodes once: with n_c = N_i(x_c)
+# the corners' basis values on node i, the particle's weight is w_i = (n_1 + .. + n_4) / 4 and
+# its gradient (cell units) (n_1 - n_3) a/V + (n_2 - n_4) b/V (g_3 = -g_1, g_4 = -g_2): 25 grid
+# visits per transfer with cubic B-splines instead of 64. The few particles that do not fit a
+# box (boundary-modified weights near a grid edge, domains stretched past about a cell, a box
+# leaving the window) take the per-corner loops, for which the block's corners' weights are
+# evaluated with their first nodes (``block_weights``) only when the block holds one.
 
 @nb.njit(cache=True, inline="always")
 def _cpdi_buffers(tag):
-    """Per-block scratch of CPDI: corner coordinates C[c, axis, q], first nodes I0[c, q],
-    J0[c, q], weights/derivatives WX[c], WY[c] of each corner, and the gradient vectors
-    GV[0..3, q] = (ax, ay, bx, by) of each particle."""
-    k2 = 2 * stencil(tag)
-    return (np.empty((4, 2, BLOCK)), np.empty((4, BLOCK), np.int64), np.empty((4, BLOCK), np.int64),
-            np.empty((4, k2, BLOCK)), np.empty((4, k2, BLOCK)), np.empty((4, BLOCK)))
+    """Per-block scratch of CPDI: corner coordinates C[axis, c, q], the gradient vectors
+    GV[0..3, q] = (ax, ay, bx, by) of each particle; the node boxes' first nodes BI[q], BJ[q],
+    the corners' weights on them UX[c, a, q], UY[c, b, q] (a, b = 0 .. K) and whether particle
+    q fits its box, OK[q] (from the per-axis OKX[q], OKY[q]); for the per-corner path, the first nodes I0[c, q], J0[c, q] and
+    weights/derivatives WX[c], WY[c] of each corner."""
+    K = stencil(tag)
+    return (np.empty((2, 4, BLOCK)), np.empty((4, BLOCK)),
+            np.zeros(BLOCK, np.int64), np.zeros(BLOCK, np.int64),
+            np.zeros((4, K + 1, BLOCK)), np.zeros((4, K + 1, BLOCK)), np.zeros(BLOCK, np.bool_),
+            np.zeros(BLOCK), np.zeros(BLOCK),
+            np.empty((4, BLOCK), np.int64), np.empty((4, BLOCK), np.int64),
+            np.empty((4, 2 * K, BLOCK)), np.empty((4, 2 * K, BLOCK)))
 
 
 @nb.njit(cache=True, inline="always")
-def _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV):
-    """Corners, their basis weights and the gradient vectors of particles p0 .. p0 + nq - 1.
-    A corner whose support leaves the window (nwx x nwy nodes from (ox, oy)) gets zero weights
-    on nodes inside it and is counted in ``escape`` (shape[3]: [count, first particle])."""
+def _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, B):
+    """Corners, gradient vectors and node boxes of particles p0 .. p0 + nq - 1 into the buffers
+    ``B`` (see ``_cpdi_buffers``); when one of them does not fit its box, also every corner's
+    weights for the per-corner path. There a corner whose support leaves the window (nwx x nwy
+    nodes from (ox, oy)) gets zero weights on nodes inside it and is counted in ``escape``
+    (shape[3]: [count, first particle]); a particle that fits its box has none such."""
+    C, GV, BI, BJ, UX, UY, OK, OKX, OKY, I0, J0, WX, WY = B
     tag, domain, F, escape = shape[0], shape[1], shape[2], shape[3]
     for q in range(nq):
         p = p0 + q
         cx, cy, ax, ay, bx, by = cpdi_corners(domain, F, p, (x[p, 0] - origin[0]) * inv_h,
                                               (x[p, 1] - origin[1]) * inv_h, ncx, ncy)
         for c in range(4):
-            C[c, 0, q] = cx[c]
-            C[c, 1, q] = cy[c]
+            C[0, c, q] = cx[c]
+            C[1, c, q] = cy[c]
         GV[0, q] = ax
         GV[1, q] = ay
         GV[2, q] = bx
         GV[3, q] = by
+    cpdi_boxes(tag, C[0], nq, ncx, ox, nwx, BI, UX, OKX)
+    cpdi_boxes(tag, C[1], nq, ncy, oy, nwy, BJ, UY, OKY)
+    every = True
+    for q in range(nq):
+        fits = OKX[q] * OKY[q] > 0.0
+        OK[q] = fits
+        every &= fits
+    if every:
+        return
     for c in range(4):
         # the basis's block weights take the corners as points (their L argument is unused)
-        block_weights(tag, C[c, 0], C[c, 0], nq, ncx, I0[c], WX[c])
-        block_weights(tag, C[c, 1], C[c, 1], nq, ncy, J0[c], WY[c])
+        block_weights(tag, C[0, c], C[0, c], nq, ncx, I0[c], WX[c])
+        block_weights(tag, C[1, c], C[1, c], nq, ncy, J0[c], WY[c])
     K = stencil(tag)
     for c in range(4):
         for q in range(nq):
@@ -349,29 +377,124 @@ def _corner_vector(GV, q, c):
     return sign * GV[k, q], sign * GV[k + 1, q]
 
 
+# The per-corner path of a particle that does not fit its box: separate functions, not inlined,
+# so that the box loops above compile as tight as the point kernels' (inlined, these made the
+# box path up to twice as slow).
+
+@nb.njit(cache=True)
+def _p2g_corners(G, q, K, B, ox, oy, mp, mvx, mvy, fx, fy, sxx, syy, sxy, mass, force):
+    """Particle q's p2g at its four corners: m/4, m v/4 (``mass``) and
+    f_c = -V sigma g_c + f_ext / 4 (``force``) on each corner's nodes."""
+    GV, I0, J0, WX, WY = B[1], B[9], B[10], B[11], B[12]
+    for c in range(4):
+        gx, gy = _corner_vector(GV, q, c)
+        fcx = 0.25 * fx + sxx * gx + sxy * gy
+        fcy = 0.25 * fy + sxy * gx + syy * gy
+        for a in range(K):
+            ii = I0[c, q] + a - ox
+            wa = WX[c, a, q]
+            for b in range(K):
+                jj = J0[c, q] + b - oy
+                w = wa * WY[c, b, q]
+                if mass:
+                    G[ii, jj, 0] += 0.25 * w * mp
+                    G[ii, jj, 1] += 0.25 * w * mvx
+                    G[ii, jj, 2] += 0.25 * w * mvy
+                if force:
+                    G[ii, jj, 3] += w * fcx
+                    G[ii, jj, 4] += w * fcy
+
+
+@nb.njit(cache=True)
+def _gather_corners(G, q, K, B, ox, oy):
+    """The mean over particle q's corners of the grid's velocity (fields 1, 2) and change (3, 4)."""
+    I0, J0, WX, WY = B[9], B[10], B[11], B[12]
+    vx = 0.0
+    vy = 0.0
+    dvx = 0.0
+    dvy = 0.0
+    for c in range(4):
+        for a in range(K):
+            ii = I0[c, q] + a - ox
+            wa = WX[c, a, q]
+            for b in range(K):
+                jj = J0[c, q] + b - oy
+                w = wa * WY[c, b, q]
+                vx += w * G[ii, jj, 1]
+                vy += w * G[ii, jj, 2]
+                dvx += w * G[ii, jj, 3]
+                dvy += w * G[ii, jj, 4]
+    return 0.25 * vx, 0.25 * vy, 0.25 * dvx, 0.25 * dvy
+
+
+@nb.njit(cache=True)
+def _scatter_corners(G, k, q, K, B, ox, oy, fx, fy):
+    """G[i, k] += fx / 4 and G[i, k + 1] += fy / 4 with each corner's weights of particle q."""
+    I0, J0, WX, WY = B[9], B[10], B[11], B[12]
+    fx *= 0.25
+    fy *= 0.25
+    for c in range(4):
+        for a in range(K):
+            ii = I0[c, q] + a - ox
+            wa = WX[c, a, q]
+            for b in range(K):
+                jj = J0[c, q] + b - oy
+                w = wa * WY[c, b, q]
+                G[ii, jj, k] += w * fx
+                G[ii, jj, k + 1] += w * fy
+
+
+@nb.njit(cache=True)
+def _gradient_corners(G, k, q, K, B, ox, oy):
+    """L = sum_c v(x_c) (x) g_c of particle q, v the grid field (k, k + 1)."""
+    GV, I0, J0, WX, WY = B[1], B[9], B[10], B[11], B[12]
+    lxx = 0.0
+    lxy = 0.0
+    lyx = 0.0
+    lyy = 0.0
+    for c in range(4):
+        gx, gy = _corner_vector(GV, q, c)
+        ux = 0.0   # v(x_c), the corner's interpolated velocity
+        uy = 0.0
+        for a in range(K):
+            ii = I0[c, q] + a - ox
+            wa = WX[c, a, q]
+            for b in range(K):
+                jj = J0[c, q] + b - oy
+                w = wa * WY[c, b, q]
+                ux += w * G[ii, jj, k]
+                uy += w * G[ii, jj, k + 1]
+        lxx += ux * gx
+        lxy += ux * gy
+        lyx += uy * gx
+        lyy += uy * gy
+    return lxx, lxy, lyx, lyy
+
+
 def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
               G, ox, oy, origin, inv_h, ncx, ncy, shape):
-    """CPDI ``p2g``: at each corner m/4, m v/4 and f_c = -V sigma g_c + f_ext / 4."""
+    """CPDI ``p2g``: mass m w_i, momentum m v w_i and force f_ext w_i - V sigma grad w_i on the
+    particle's node box (per corner, as the paper writes it: m/4, m v/4 and
+    f_c = -V sigma g_c + f_ext / 4 at each corner's nodes)."""
     with_force = stress is not None or gravity is not None or load_id is not None
     tag = shape[0]
     K = stencil(tag)
-    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    B = _cpdi_buffers(tag)
+    GV, BI, BJ, UX, UY, OK, OKX, OKY = B[1], B[2], B[3], B[4], B[5], B[6], B[7], B[8]
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
         nq = min(BLOCK, n - p0)
-        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, B)
         for q in range(nq):
             p = p0 + q
-            mp = 0.25 * m[p]
+            mp = m[p]
             mvx = 0.0
             mvy = 0.0
             if v is not None:
                 mvx = mp * v[p, 0]
                 mvy = mp * v[p, 1]
             fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            fx *= 0.25
-            fy *= 0.25
             c0 = 0.0
             sxx = 0.0
             syy = 0.0
@@ -381,60 +504,81 @@ def _p2g_cpdi(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                 sxx = c0 * stress[p, 0]
                 syy = c0 * stress[p, 1]
                 sxy = c0 * stress[p, 2]
-            for c in range(4):
-                gx, gy = _corner_vector(GV, q, c)
-                fcx = fx + sxx * gx + sxy * gy
-                fcy = fy + sxy * gx + syy * gy
-                for a in range(K):
-                    ii = I0[c, q] + a - ox
-                    wa = WX[c, a, q]
-                    for b in range(K):
-                        jj = J0[c, q] + b - oy
-                        w = wa * WY[c, b, q]
+            if OK[q]:
+                # -V sigma grad w_i = (n_1 - n_3) (-V sigma a/V) + (n_2 - n_4) (-V sigma b/V)
+                ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
+                tax = sxx * ax + sxy * ay
+                tay = sxy * ax + syy * ay
+                tbx = sxx * bx + sxy * by
+                tby = sxy * bx + syy * by
+                i0 = BI[q] - ox
+                j0 = BJ[q] - oy
+                for a in range(K - 1 + int(OKX[q])):
+                    u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
+                    for b in range(K - 1 + int(OKY[q])):
+                        n0 = u0 * UY[0, b, q]
+                        n1 = u1 * UY[1, b, q]
+                        n2 = u2 * UY[2, b, q]
+                        n3 = u3 * UY[3, b, q]
+                        w = 0.25 * ((n0 + n1) + (n2 + n3))
+                        ii = i0 + a
+                        jj = j0 + b
                         if v is not None:
                             G[ii, jj, 0] += w * mp
                             G[ii, jj, 1] += w * mvx
                             G[ii, jj, 2] += w * mvy
                         if with_force:
-                            G[ii, jj, 3] += w * fcx
-                            G[ii, jj, 4] += w * fcy
+                            d0 = n0 - n2
+                            d1 = n1 - n3
+                            G[ii, jj, 3] += w * fx + d0 * tax + d1 * tbx
+                            G[ii, jj, 4] += w * fy + d0 * tay + d1 * tby
+                continue
+            _p2g_corners(G, q, K, B, ox, oy, mp, mvx, mvy, fx, fy, sxx, syy, sxy,
+                         v is not None, with_force)
 
 
 def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
-    """CPDI ``g2p_velocity``: the mean of the corners' grid velocities (and changes); the MUSL
-    re-map scatters m v / 4 at each corner."""
+    """CPDI ``g2p_velocity``: the mean of the corners' grid velocities (and changes), gathered
+    over the particle's node box; the MUSL re-map scatters m v w_i on it."""
     vmax2 = 0.0
     bad = 0
     flip = 1.0 - pic
     tag = shape[0]
     K = stencil(tag)
-    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    B = _cpdi_buffers(tag)
+    BI, BJ, UX, UY, OK, OKX, OKY = B[2], B[3], B[4], B[5], B[6], B[7], B[8]
+    WB = np.empty((K + 1, K + 1))   # a particle's box weights (times 4)
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
         nq = min(BLOCK, n - p0)
-        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+        _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, B)
         for q in range(nq):
             p = p0 + q
-            dvx = 0.0
-            dvy = 0.0
-            vx = 0.0
-            vy = 0.0
-            for c in range(4):
-                for a in range(K):
-                    ii = I0[c, q] + a - ox
-                    wa = WX[c, a, q]
-                    for b in range(K):
-                        jj = J0[c, q] + b - oy
-                        w = wa * WY[c, b, q]
+            if OK[q]:
+                vx = 0.0
+                vy = 0.0
+                dvx = 0.0
+                dvy = 0.0
+                i0 = BI[q] - ox
+                j0 = BJ[q] - oy
+                for a in range(K - 1 + int(OKX[q])):
+                    u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
+                    for b in range(K - 1 + int(OKY[q])):
+                        w = (u0 * UY[0, b, q] + u1 * UY[1, b, q]) + (u2 * UY[2, b, q] + u3 * UY[3, b, q])
+                        WB[a, b] = w   # for the re-map
+                        ii = i0 + a
+                        jj = j0 + b
                         vx += w * G[ii, jj, 1]
                         vy += w * G[ii, jj, 2]
                         dvx += w * G[ii, jj, 3]
                         dvy += w * G[ii, jj, 4]
-            vx *= 0.25
-            vy *= 0.25
-            dvx *= 0.25
-            dvy *= 0.25
+                vx *= 0.25
+                vy *= 0.25
+                dvx *= 0.25
+                dvy *= 0.25
+            else:
+                vx, vy, dvx, dvy = _gather_corners(G, q, K, B, ox, oy)
             dx[p, 0] = dt * vx
             dx[p, 1] = dt * vy
             nvx = pic * vx + flip * (v[p, 0] + dvx)   # FLIP with a PIC blend, as the point kernel
@@ -447,35 +591,38 @@ def _g2p_velocity_cpdi(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, 
             elif not speed2 < 1e300:  # NaN or inf
                 bad += 1
             if remap:
-                mvx = 0.25 * m[p] * nvx
-                mvy = 0.25 * m[p] * nvy
-                for c in range(4):
-                    for a in range(K):
-                        ii = I0[c, q] + a - ox
-                        wa = WX[c, a, q]
-                        for b in range(K):
-                            jj = J0[c, q] + b - oy
-                            w = wa * WY[c, b, q]
-                            G[ii, jj, 5] += w * mvx
-                            G[ii, jj, 6] += w * mvy
+                mvx = m[p] * nvx
+                mvy = m[p] * nvy
+                if OK[q]:
+                    i0 = BI[q] - ox
+                    j0 = BJ[q] - oy
+                    for a in range(K - 1 + int(OKX[q])):
+                        for b in range(K - 1 + int(OKY[q])):
+                            w = 0.25 * WB[a, b]
+                            G[i0 + a, j0 + b, 5] += w * mvx
+                            G[i0 + a, j0 + b, 6] += w * mvy
+                else:
+                    _scatter_corners(G, 5, q, K, B, ox, oy, mvx, mvy)
     return vmax2 ** 0.5, bad
 
 
 def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, dt,
                          gravity, load_id, load_w, load_vec,
                          G, ox, oy, origin, inv_h, ncx, ncy, shape):
-    """CPDI ``g2p_kinematics``: L = sum_c v(x_c) (x) g_c, then as the point kernel. The block's
-    corners come from F before this step's update (every transfer of the step uses them)."""
+    """CPDI ``g2p_kinematics``: L = sum_i v_i (x) grad w_i = sum_c v(x_c) (x) g_c, then as the
+    point kernel. The block's corners come from F before this step's update (every transfer of
+    the step uses them)."""
     work = 0.0
     tag = shape[0]
     K = stencil(tag)
-    C, I0, J0, WX, WY, GV = _cpdi_buffers(tag)
+    B = _cpdi_buffers(tag)
+    GV, BI, BJ, UX, UY, OK, OKX, OKY = B[1], B[2], B[3], B[4], B[5], B[6], B[7], B[8]
     nwx, nwy = G.shape[0], G.shape[1]
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
         nq = min(BLOCK, n - p0)
         if de is not None:
-            _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, C, I0, J0, WX, WY, GV)
+            _cpdi_block(x, p0, nq, origin, inv_h, ncx, ncy, shape, ox, oy, nwx, nwy, B)
         for q in range(nq):
             p = p0 + q
             if de is not None:
@@ -483,22 +630,32 @@ def _g2p_kinematics_cpdi(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx, 
                 lxy = 0.0
                 lyx = 0.0
                 lyy = 0.0
-                for c in range(4):
-                    gx, gy = _corner_vector(GV, q, c)
-                    ux = 0.0   # v(x_c), the corner's interpolated velocity
-                    uy = 0.0
-                    for a in range(K):
-                        ii = I0[c, q] + a - ox
-                        wa = WX[c, a, q]
-                        for b in range(K):
-                            jj = J0[c, q] + b - oy
-                            w = wa * WY[c, b, q]
-                            ux += w * G[ii, jj, vel_field]
-                            uy += w * G[ii, jj, vel_field + 1]
-                    lxx += ux * gx
-                    lxy += ux * gy
-                    lyx += uy * gx
-                    lyy += uy * gy
+                if OK[q]:
+                    # L = sum_i v_i (x) [(n_1 - n_3) a/V + (n_2 - n_4) b/V]: the two sums first
+                    i0 = BI[q] - ox
+                    j0 = BJ[q] - oy
+                    xa = 0.0
+                    xb = 0.0
+                    ya = 0.0
+                    yb = 0.0
+                    for a in range(K - 1 + int(OKX[q])):
+                        u0, u1, u2, u3 = UX[0, a, q], UX[1, a, q], UX[2, a, q], UX[3, a, q]
+                        for b in range(K - 1 + int(OKY[q])):
+                            d0 = u0 * UY[0, b, q] - u2 * UY[2, b, q]
+                            d1 = u1 * UY[1, b, q] - u3 * UY[3, b, q]
+                            gvx = G[i0 + a, j0 + b, vel_field]
+                            gvy = G[i0 + a, j0 + b, vel_field + 1]
+                            xa += gvx * d0
+                            xb += gvx * d1
+                            ya += gvy * d0
+                            yb += gvy * d1
+                    ax, ay, bx, by = GV[0, q], GV[1, q], GV[2, q], GV[3, q]
+                    lxx = xa * ax + xb * bx
+                    lxy = xa * ay + xb * by
+                    lyx = ya * ax + yb * bx
+                    lyy = ya * ay + yb * by
+                else:
+                    lxx, lxy, lyx, lyy = _gradient_corners(G, vel_field, q, K, B, ox, oy)
                 strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
             if dx is not None:
                 work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)
