@@ -181,3 +181,16 @@ def test_histories_follow_their_particles(res):
             want = [*u, *f["v"][i][pid], *f["x"][i][pid], *f["stress"][i][pid][:3]]
             np.testing.assert_allclose(row, want, rtol=1e-14, atol=1e-300)
     assert abs(res.histories["tip"]["uy"][-1]) > 1e-3  # the tip moved
+
+
+def test_named_components_are_the_columns_they_name(res):
+    """res.frame(i) names every component (docs/output.md): each named column is that
+    component of the frame field (stress sxx syy sxy szz, strain exx eyy gxy, ...)."""
+    names = {"x": ("x", "y"), "v": ("vx", "vy"), "stress": ("sxx", "syy", "sxy", "szz"),
+             "strain": ("exx", "eyy", "gxy"), "eps_p": ("epxx", "epyy", "gpxy"),
+             "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz")}
+    i = len(res.frame_times) - 1
+    table = res.frame(i)
+    for field, cols in names.items():
+        for k, col in enumerate(cols):
+            np.testing.assert_array_equal(np.asarray(table[col]), res.frames[field][i][:, k], err_msg=col)
