@@ -289,6 +289,11 @@ def test_alltoallv_round_trip_mixed_dtypes():
     for k, arr in got.items():
         expected = np.concatenate([_mixed_fields(s, 40)[k][idx[src == s]] for s in range(size)])
         assert everywhere(np.array_equal(arr, expected))
+    # every row arrived where its source sent it, and every row sent here arrived
+    for s in range(size):
+        n_s = 0 if s == 1 else 7 + 2 * s
+        dest_s = np.random.default_rng(3 + s).integers(0, size, n_s)
+        assert everywhere(np.array_equal(np.sort(idx[src == s]), np.nonzero(dest_s == rank)[0]))
     # Send everything home again and restore the original order
     back = alltoallv_fields(comm, got, got["src"].astype(np.int64))
     order = np.argsort(back["idx"], kind="stable")

@@ -56,6 +56,10 @@ def mpi(n, *args):
 KERNELS = "tests/unit/test_kernels.py"
 TWIN = KERNELS + "::test_g2p_kinematics_matches_reference"
 PHASES = "tests/unit/test_solver_phases.py"
+ROT = "tests/unit/test_plastic_rotation.py"
+GROUND = "tests/unit/test_ground_motion_between_samples.py"
+REACT = "tests/unit/test_reactions_off_origin.py"
+REPORTED = "tests/unit/test_reported_quantities.py"
 
 #: (name, file, original, replacement, test commands); ``fast`` names the CI subset
 MUTATIONS = [
@@ -166,6 +170,103 @@ MUTATIONS = [
          original="c = E / (1 - nu * nu)", replacement="c = E",
          tests=[["tests/unit/test_elastic.py::test_plane_stress_increment_is_D_de"]],
          why="the plane-stress modulus E / (1 - nu^2) without its denominator"),
+    # -- issue 21: the classes the suite was blind to, and every package ---------------------
+    dict(name="back_stress_not_rotated", file="pmpm/physics/materials/base.py",
+         original='    tensor_state_fields = ("back_stress",)', replacement="    tensor_state_fields = ()",
+         tests=[[ROT + "::test_a_rigid_rotation_rotates_the_plastic_state"]],
+         why="the kinematic back stress not rotated with the stress under large rotations"),
+    dict(name="solver_skips_state_rotation", file="pmpm/core/solver.py",
+         original="            for name in material.tensor_state_fields:\n                self._rotate(p[name])",
+         replacement="            for name in ():\n                self._rotate(p[name])",
+         tests=[[ROT + "::test_a_spinning_yielded_block_carries_its_back_stress_round"]],
+         why="the solver's update_stress rotates the stress but not the materials' tensor state"),
+    dict(name="bilinear_plane_strain_multiplier", file="pmpm/physics/materials/bilinear_vonmises.py",
+         original="dl = (phi_tr - sy) / (c + 3.0 * mu)", replacement="dl = (phi_tr - sy) / (3.0 * mu)",
+         tests=[[ROT + "::test_rotating_plastic_straining_matches_the_closed_form"]],
+         why="the plane-strain return mapping's multiplier without the hardening modulus"),
+    dict(name="ground_velocity_quadratic_term", file="pmpm/physics/groundmotion.py",
+         original="(self.a[k + 1] - self.a[k]) * tau * tau / (2 * h))",
+         replacement="(self.a[k + 1] - self.a[k]) * tau * tau / h)",
+         tests=[[GROUND + "::test_velocity_at_and_between_samples_is_the_exact_integral"]],
+         why="the ground velocity between samples with a wrong quadratic term of the integral"),
+    dict(name="ground_accelerates_after_the_record", file="pmpm/physics/groundmotion.py",
+         original="return float(self.v[-1] + self.a[-1] * 0.0)",
+         replacement="return float(self.v[-1] + self.a[-1] * (time - self.t[-1]))",
+         tests=[[GROUND + "::test_velocity_at_and_between_samples_is_the_exact_integral"]],
+         why="after the record ends the ground keeps accelerating instead of keeping its velocity"),
+    dict(name="reaction_moment_wrong_origin", file="pmpm/results/reactions.py",
+         original="        x0, y0 = self.grid.node_coords(window.ox, window.oy)",
+         replacement="        x0, y0 = window.ox * self.grid.h, window.oy * self.grid.h",
+         tests=[[REACT + "::test_kernel_moments_on_a_window_away_from_the_origin"]],
+         why="the reactions' moments taken with node coordinates that miss the grid's origin"),
+    dict(name="reaction_moment_point_drops_a_term", file="pmpm/results/reactions.py",
+         original="R[:, 2] -= self.points[:, 0] * R[:, 1] - self.points[:, 1] * R[:, 0]",
+         replacement="R[:, 2] -= self.points[:, 0] * R[:, 1]",
+         tests=[[REACT + "::test_a_held_body_reacts_with_minus_its_loads_and_their_moment"]],
+         why="the moment moved to the boundary's point without the horizontal reaction's arm"),
+    dict(name="elastic_energy_shear_term", file="pmpm/core/kernels/grid_ops.py",
+         original="e += vol[p] * (0.5 * normal / E + (1 + nu) / E * sxy * sxy)",
+         replacement="e += vol[p] * (0.5 * normal / E + 0.5 * (1 + nu) / E * sxy * sxy)",
+         tests=[[REPORTED + "::test_energies_are_the_sums_of_the_frame_fields"]],
+         why="the strain energy's shear term halved (tensor instead of engineering shear)"),
+    dict(name="point_load_work_component", file="pmpm/core/kernels/point_loads.py",
+         original="load_vec[k, 1] * dx[p, 1])", replacement="load_vec[k, 1] * dx[p, 0])",
+         tests=[[REPORTED + "::test_external_work_is_the_work_of_gravity_and_the_tip_force"]],
+         why="the work of a set force's y component taken over the x move"),
+    dict(name="plastic_work_not_volume_weighted", file="pmpm/core/solver.py",
+         original='plastic = float(np.sum(p["plastic_work"] * p["vol"]))',
+         replacement='plastic = float(np.sum(p["plastic_work"]))',
+         tests=[[REPORTED + "::test_energies_are_the_sums_of_the_frame_fields"]],
+         why="the reported plastic work sums the densities without the particle volumes"),
+    dict(name="history_uy_from_x0", file="pmpm/io/tracking.py",
+         original="out[k] = (x[0] - x0[0], x[1] - x0[1],", replacement="out[k] = (x[0] - x0[0], x[1] - x0[0],",
+         tests=[[REPORTED + "::test_histories_follow_their_particles"]],
+         why="a track's uy measured from the initial x instead of y"),
+    dict(name="stress_units", file="pmpm/io/schema.py",
+         original='"stress": ("Pa", "Cauchy stress', replacement='"stress": ("kPa", "Cauchy stress',
+         tests=[["tests/unit/test_python_api.py::test_in_memory_and_written_results_agree"]],
+         why="the results file says kPa for a stress stored in Pa"),
+    dict(name="rectangle_lattice_offset", file="pmpm/scene/bodies.py",
+         original="xs = lo[0] + (np.arange(n[0]) + 0.5) * dx[0]", replacement="xs = lo[0] + (np.arange(n[0]) + 0.25) * dx[0]",
+         tests=[[REPORTED + "::test_fields_and_their_derived_state"]],
+         why="a rectangle's particles a quarter spacing off their cell centres along x"),
+    dict(name="expression_minus_adds", file="pmpm/scene/expressions.py",
+         original="ast.Sub: np.subtract", replacement="ast.Sub: np.add",
+         tests=[["tests/unit/test_expressions.py::test_values_match_numpy"]],
+         why="a scene expression's minus evaluated as a plus"),
+    dict(name="roller_components_swapped", file="pmpm/physics/boundary.py",
+         original='"roller_x": (1,), "roller_y": (0,)', replacement='"roller_x": (0,), "roller_y": (1,)',
+         tests=[["tests/unit/test_reactions.py::test_impulses_are_the_momentum_the_bcs_remove"]],
+         why="a roller fixes the component it should leave free"),
+    dict(name="block_range_remainder", file="decomposition/slab.py",
+         original="count = q + (1 if r > rank else 0)", replacement="count = q + (1 if r >= rank else 0)",
+         tests=[["tests/unit/test_slab.py::test_block_range_covers_contiguously"]],
+         why="the slab rule gives the remainder to one rank too many (overlapping slabs)"),
+    dict(name="plastic_moment_from_inertia", file="pmpm/results/hinges.py",
+         original='Mp=sigma_y * props["Z"])', replacement='Mp=sigma_y * props["I"])',
+         tests=[["tests/unit/test_section_capacities.py::test_capacities_of_a_rectangular_strip_are_its_closed_forms"]],
+         why="a cut's plastic moment from its second moment instead of its plastic modulus"),
+    dict(name="effects_overhead_figure", file="pmpm/benchmarks/throughput.py",
+         original='"overhead": med / base - 1,', replacement='"overhead": med / base,',
+         tests=[["tests/unit/test_bench.py::test_effects_prints_every_effect"]],
+         why="bench effects' JSON overhead is the time ratio, not the ratio less one it prints"),
+    dict(name="effects_scene_without_its_effect", file="pmpm/benchmarks/throughput.py",
+         original='"damping": block_scene(n, extra_loads={"damping": 0.5}),', replacement='"damping": block_scene(n),',
+         tests=[["tests/unit/test_bench.py::test_each_effect_scene_differs_from_the_bare_block_by_its_effect_only"]],
+         why="bench effects times the bare block under the name of an effect"),
+    dict(name="migrate_rows_unsorted", file="decomposition/exchange.py",
+         original='order = np.argsort(dest, kind="stable")', replacement="order = np.arange(len(dest))",
+         tests=[mpi(2, "tests/mpi/test_decomposition.py::test_alltoallv_round_trip_mixed_dtypes")],
+         why="migration packs the rows unsorted by destination: rows reach the wrong ranks"),
+    dict(name="stress_component_names_swapped", file="pmpm/io/hdf5.py",
+         original='"stress": ("sxx", "syy", "sxy", "szz"),', replacement='"stress": ("sxx", "sxy", "syy", "szz"),',
+         tests=[[REPORTED + "::test_named_components_are_the_columns_they_name"]],
+         why="the results file names the stress columns in the wrong order (syy labelled sxy)"),
+    dict(name="mpi_outcomes_not_agreed", file="tests/conftest.py",
+         original="    if _AGREE is not None:\n        _agree(_AGREE, item, report)",
+         replacement="    pass  # mutated: no agreement",
+         tests=[["tests/unit/test_mpi_failures_do_not_hang.py::test_with_x_a_failure_on_one_rank_stops_every_rank"]],
+         why="under mpirun a failure on one rank is not a failure on the others (-x leaves them hanging)"),
 ]
 
 
@@ -199,8 +300,14 @@ def check_snippets(selected, root=ROOT):
 
 
 def _copy_tree(dest):
-    ignore = shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.pyc", ".pytest_cache",
-                                    "*_results", "results", "*.egg-info")
+    patterns = shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.pyc", ".pytest_cache",
+                                      "*_results", "*.egg-info")
+
+    def ignore(folder, names):
+        # a run's output folder "results" at the top, never the package pmpm/results
+        top = {"results"} & set(names) if pathlib.Path(folder) == ROOT else set()
+        return patterns(folder, names) | top
+
     shutil.copytree(ROOT, dest, ignore=ignore, symlinks=True)
 
 

@@ -71,14 +71,15 @@ def _rotate_voigt(t, theta):
 
 
 def _drive(s, L_at, steps, dt, samples):
-    """Advance ``s`` by ``steps`` phases with the grid velocity L(t) (x - CENTRE), L evaluated
-    at the step's end (the frame the objective rate rotates the stress into); returns the
-    states at ``samples`` equal intervals: (t, stress, back_stress, eps_p_eq, plastic_work)."""
+    """Advance ``s`` by ``steps`` phases with the grid velocity L(t) (x - CENTRE), t from 0 at
+    this call's start, L evaluated at the step's end (the frame the objective rate rotates the
+    stress into); returns the states at ``samples`` equal intervals: (t, stress, back_stress,
+    eps_p_eq, plastic_work)."""
     w, g = s.window, s.grid
     x = g.origin[0] + (w.ox + np.arange(w.shape[0])) * g.h - CENTRE[0]
     y = g.origin[1] + (w.oy + np.arange(w.shape[1])) * g.h - CENTRE[1]
     p, out = s.particles, []
-    t = getattr(s, "_test_time", 0.0)
+    t = 0.0
     for k in range(1, steps + 1):
         t += dt
         L = L_at(t)
@@ -90,11 +91,10 @@ def _drive(s, L_at, steps, dt, samples):
         if k % (steps // samples) == 0:
             out.append((t, p["stress"].copy(), p["back_stress"].copy(), p["eps_p_eq"].copy(),
                         p["plastic_work"].copy()))
-    s._test_time = t
     return out
 
 
-def _d0(formulation):
+def _d0():
     """A strain rate (1/s) with a volumetric part, principal axes at 0.4 rad to x."""
     Q = _rot(0.4)
     return Q @ np.diag([1.0, -0.45]) @ Q.T
@@ -122,7 +122,7 @@ def test_a_rigid_rotation_rotates_the_plastic_state(material, rate, formulation)
     for the continued loading, where the plastic correction re-projects onto the surface)."""
     theta, n_spin = 2.3, 1000
     dt, eps_y = 1e-3, SY / E
-    d0 = _d0(formulation)
+    d0 = _d0()
     n_load = 300
     rate_load = 3 * eps_y / (n_load * dt)  # 3 eps_y of the largest principal strain
 
@@ -196,7 +196,7 @@ def test_rotating_plastic_straining_matches_the_closed_form(rate):
     d_theta^2 / 3, the test above): the error stays below theta d_theta^2 of the peak stress
     and falls at least as fast as the step."""
     theta_end, eps_y = 2.6, SY / E
-    d0 = _d0("plane_strain")
+    d0 = _d0()
     errors = []
     for steps in (800, 1600):
         dt = 1e-3

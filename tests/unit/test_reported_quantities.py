@@ -34,7 +34,7 @@ H, PPC = 0.05, 2
 G_VEC = np.array([1.5, -9.81])
 F_TIP = np.array([-6.0, -30.0])
 TIP_BOX = ([1.85, -0.55], [2.0, -0.4])
-FIELDS = ["x", "x0", "v", "m", "vol", "stress", "strain", "eps_p", "eps_p_eq", "plastic_work", "back_stress"]
+FIELDS = ["x", "x0", "v", "m", "vol", "stress", "strain", "eps_p", "eps_p_eq", "plastic_work", "back_stress", "F"]
 
 
 @pytest.fixture(scope="module")
@@ -162,6 +162,16 @@ def test_fields_and_their_derived_state(res):
         ep = f["eps_p"][i]
         norm = np.sqrt(ep[:, 0] ** 2 + ep[:, 1] ** 2 + (ep[:, 0] + ep[:, 1]) ** 2 + 2 * (0.5 * ep[:, 2]) ** 2)
         assert np.all(f["eps_p_eq"][i] >= math.sqrt(2 / 3) * norm * (1 - 1e-9))
+        # the volume is the initial one (m / density, unit thickness) times the in-plane det F
+        F = f["F"][i]
+        np.testing.assert_allclose(f["vol"][i], f["m"][i] / RHO * (F[:, 0] * F[:, 3] - F[:, 1] * F[:, 2]),
+                                   rtol=1e-12)
+        # small strain: F - I is the displacement gradient, whose symmetric part the strain
+        # accumulates; they differ by the second-order terms, about |F - I|^2 / 2 (a rotation
+        # by theta: cos(theta) - 1 = -theta^2 / 2), bounded here by 2 |F - I|^2
+        eps = f["strain"][i]
+        gap = np.abs(np.column_stack([F[:, 0] - 1, F[:, 3] - 1, F[:, 1] + F[:, 2]]) - eps).max()
+        assert gap <= 2 * np.abs(np.column_stack([F[:, 0] - 1, F[:, 3] - 1, F[:, 1], F[:, 2]])).max() ** 2 + 1e-15
     last = len(res.frame_times) - 1
     assert f["eps_p_eq"][last].max() > SY / E  # yielded: the identities above see plastic strain
     assert np.abs(f["back_stress"][last]).max() > 0.01 * SY
@@ -181,3 +191,16 @@ def test_histories_follow_their_particles(res):
             want = [*u, *f["v"][i][pid], *f["x"][i][pid], *f["stress"][i][pid][:3]]
             np.testing.assert_allclose(row, want, rtol=1e-14, atol=1e-300)
     assert abs(res.histories["tip"]["uy"][-1]) > 1e-3  # the tip moved
+
+
+def test_named_components_are_the_columns_they_name(res):
+    """res.frame(i) names every component (docs/output.md): each named column is that
+    component of the frame field (stress sxx syy sxy szz, strain exx eyy gxy, ...)."""
+    names = {"x": ("x", "y"), "v": ("vx", "vy"), "stress": ("sxx", "syy", "sxy", "szz"),
+             "strain": ("exx", "eyy", "gxy"), "eps_p": ("epxx", "epyy", "gpxy"),
+             "back_stress": ("back_xx", "back_yy", "back_xy", "back_zz")}
+    i = len(res.frame_times) - 1
+    table = res.frame(i)
+    for field, cols in names.items():
+        for k, col in enumerate(cols):
+            np.testing.assert_array_equal(np.asarray(table[col]), res.frames[field][i][:, k], err_msg=col)
