@@ -314,6 +314,41 @@ def _member_loads(members, geo, nodes, tol):
     return out
 
 
+def _nodal_masses(t, nodes, members, joints, bodies, materials):
+    """``[[frame.masses]]``: a lumped mass at a node becomes density. The joint panel of the
+    column under the node (the column over the beam depth) is split off as its own strip, of a
+    copy of the column's material whose density adds the mass to the panel's steel; the rest
+    of the column stays as it was. Returns the bodies and the derived materials
+    (``"<material>+<node>"``)."""
+    tables = t.tables("masses")
+    derived = {}
+    for entry in tables:
+        node = _node_ref(entry, "node", nodes)
+        mass = entry.number("mass", low=0, low_open=True)
+        entry.finish()
+        below = [i for i, m in enumerate(members) if m.vertical and m.hi == node]
+        if not below:
+            raise ConfigError(entry.path("node"), f"a nodal mass needs a column under node {node!r} "
+                                                  f"(it is added to that column's joint panel)")
+        i = below[0]
+        m, body = members[i], bodies[i]
+        label = f"{m.material}+{node}"
+        if label in derived:
+            raise ConfigError(entry.path("node"), f"node {node!r} has a mass already")
+        y = nodes[node][1]
+        half = (joints.beam[node] or m.strip["depth"]) / 2
+        lo_y, hi_y = y - half, body["end"][1]   # the column's body ends at the panel's top
+        sp = m.strip
+        area = sp.get("area") or (2 * sp["flange_width"] * sp["flange_thickness"]
+                                  + (sp["depth"] - 2 * sp["flange_thickness"]) * sp["web_thickness"])
+        steel = area * (hi_y - lo_y) * materials[m.material]["density"]
+        derived[label] = dict(materials[m.material], density=materials[m.material]["density"] * (1 + mass / steel))
+        x = body["start"][0]
+        bodies[i] = dict(body, end=[x, lo_y])   # the member's body keeps its name and its start
+        bodies.append(dict(body, name=f"{m.name}_panel_{node}", material=label, start=[x, lo_y], end=[x, hi_y]))
+    return bodies, derived
+
+
 def _cuts(members, geo, nodes, tol):
     out = []
     for m, g in zip(members, geo):
@@ -396,12 +431,15 @@ def expand_frame(data):
     _check_geometry(members, geo, grid, tol)
     supports = _supports(t, nodes, members, joints, grid, tol)
     forces = _nodal_loads(t, nodes, joints, tol) + _member_loads(members, geo, nodes, tol)
-    t.finish()
     bodies = [{"name": m.name, "shape": "i_section", "material": m.material,
                "start": list(g["start"]), "end": list(g["end"]), **m.strip} for m, g in zip(members, geo)]
+    bodies, derived = _nodal_masses(t, nodes, members, joints, bodies, materials)
+    t.finish()
     tracks = [{"name": n, "point": list(p)} for n, p in nodes.items()]
     out = copy.deepcopy(data)
     del out["frame"]
+    if derived:
+        out["materials"] = dict(out["materials"], **derived)
     out["bodies"] = bodies + list(out.get("bodies", []))
     out["boundary"] = supports + list(out.get("boundary", []))
     if forces:
