@@ -21,7 +21,9 @@ in docs/scenes.md, "Frames"; in short:
   shared by mass; a member's ``load_per_length`` (N/m, times the node-to-node length) on the
   particles of its clear length;
 * two section cuts per member, named ``<member>_<node>``, at ``cut_offset`` from each clear
-  end; a tracked point per node, named after it.
+  end; a tracked point per node, named after it;
+* a nodal mass is added to the joint panel of the column under the node, split off as its own
+  strip of a denser copy of the column's material (``"<material>+<node>"``).
 """
 import copy
 import logging
@@ -60,6 +62,7 @@ class Member:
 
 
 def _node_table(t, tol):
+    """Node name -> (x, y), in the table's order; names unique, no two nodes at one point."""
     nodes = {}
     for k, n in enumerate(t.tables("nodes")):
         name = n.string("name")
@@ -87,6 +90,7 @@ def _node_ref(t, key, nodes):
 
 
 def _explicit_sections(t):
+    """``[frame.sections.<name>]``: strips given by their dimensions."""
     out = {}
     sec = t.table("sections", None)
     if sec is None:
@@ -123,6 +127,7 @@ def _strip(t, explicit, axis):
 
 
 def _member_table(t, nodes, explicit, materials, default_material, cut_offset, tol):
+    """The members, each oriented lower/left to upper/right, with its strip and cut offsets."""
     from pmpm.physics.timefunctions import parse_time_function
     members = []
     for k, m in enumerate(t.tables("members")):
@@ -245,12 +250,12 @@ def _check_geometry(members, geo, grid, tol):
                                                   f"{members[j].name!r} {why}")
 
 
-def _supports(t, nodes, members, joints, grid, tol):
+def _supports(t, nodes, members, joints, grid):
     """[[boundary]] tables of the supports (reactions recorded under the node's name)."""
     out = []
     h = grid.cell_size
     seen = set()
-    for k, s in enumerate(t.tables("supports")):
+    for s in t.tables("supports"):
         node = _node_ref(s, "node", nodes)
         kind = s.string("type", choices=SUPPORT_TYPES)
         free = s.string("direction", "x", choices=("x", "y")) if kind == "roller" else None
@@ -282,6 +287,7 @@ def _supports(t, nodes, members, joints, grid, tol):
 
 
 def _nodal_loads(t, nodes, joints, tol):
+    """A nodal load on the particles of the node's panel (a second load on a node gets its index)."""
     from pmpm.physics.timefunctions import parse_time_function
     out = []
     for k, f in enumerate(t.tables("loads")):
@@ -291,7 +297,8 @@ def _nodal_loads(t, nodes, joints, tol):
         time_function = parse_time_function(tf if tf is not None else Table({"type": "step"}, f.path("time_function")))
         f.finish()
         lo, hi = joints.panel(node, nodes[node])
-        out.append({"name": f"{node}_load" if not any(o["name"] == f"{node}_load" for o in out) else f"{node}_load{k}",
+        name = f"{node}_load" if not any(o["name"] == f"{node}_load" for o in out) else f"{node}_load{k}"
+        out.append({"name": name,
                     "lower": [lo[0] - tol, lo[1] - tol], "upper": [hi[0] + tol, hi[1] + tol],
                     "force": list(force), "time_function": time_function})
     return out
@@ -350,6 +357,7 @@ def _nodal_masses(t, nodes, members, joints, bodies, materials):
 
 
 def _cuts(members, geo, nodes, tol):
+    """Two cuts per member, ``<member>_<node>``, at its offsets from the clear ends."""
     out = []
     for m, g in zip(members, geo):
         c0, c1 = g["clear"]
@@ -429,7 +437,7 @@ def expand_frame(data):
     joints = _Joints(nodes, members)
     geo = _geometry(members, nodes, joints)
     _check_geometry(members, geo, grid, tol)
-    supports = _supports(t, nodes, members, joints, grid, tol)
+    supports = _supports(t, nodes, members, joints, grid)
     forces = _nodal_loads(t, nodes, joints, tol) + _member_loads(members, geo, nodes, tol)
     bodies = [{"name": m.name, "shape": "i_section", "material": m.material,
                "start": list(g["start"]), "end": list(g["end"]), **m.strip} for m, g in zip(members, geo)]
@@ -472,4 +480,6 @@ def frame_report(data):
             f"  {ns} supports with reactions: {names(out['boundary'], ns)}",
             f"  {nf} loads: {names(out.get('loads', {}).get('forces', []), nf)}",
             f"  {nc} section cuts: {names(out['output']['section'], nc)}",
-            f"  {nt} tracked points: {names(out['output']['track'], nt)}"]
+            f"  {nt} tracked points: {names(out['output']['track'], nt)}"] + (
+        [f"  {len(data['frame']['masses'])} nodal masses: on the joint panels of "
+         + ", ".join(m["node"] for m in data["frame"]["masses"])] if data["frame"].get("masses") else [])

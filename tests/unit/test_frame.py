@@ -3,12 +3,12 @@ writer (toml_writer.py): the expansion rules of docs/scenes.md "Frames" on a two
 two-bay frame, the table against the AISC values and the plates' own geometry, the writer's
 round trip, and ``pmpm expand``."""
 import glob
-import math
 import os
 import subprocess
 import sys
 import tomllib
 
+import numpy as np
 import pytest
 
 from pmpm.errors import ConfigError
@@ -184,3 +184,25 @@ def test_expand_command_refuses_bad_input_and_writes_nothing(tmp_path):
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert proc.stderr.startswith("pmpm: error: case.toml: frame.members[2].section: unknown section 'W16x63x'")
     assert sorted(os.listdir(tmp_path)) == ["case.toml"]
+
+
+def test_nodal_masses_add_exactly_their_mass_to_the_joint_panel():
+    """[[frame.masses]]: the panel under the node is split off with a denser copy of the
+    material; the particles' total mass grows by exactly the masses, and the mass sits in the
+    panel (its centroid is the node's height)."""
+    from mpi4py import MPI
+    from pmpm.core.solver import Solver
+    plain = two_storey()
+    heavy = two_storey(masses=[{"node": "n01", "mass": 5000.0}, {"node": "n12", "mass": 2500.0}])
+    out = expand_frame(heavy)
+    names = [b["name"] for b in out["bodies"]]
+    assert {"c00_panel_n01", "c11_panel_n12"} <= set(names) and "steel+n01" in out["materials"]
+    assert out["materials"]["steel+n01"]["E"] == 2e11
+    for data in (plain, heavy):
+        data["particles_per_cell"] = 3   # 11 rows across W14X90 at 0.1 m cells (7 cannot carry its I)
+    pa = Solver(parse_scene(plain), MPI.COMM_SELF).particles
+    pb = Solver(parse_scene(heavy), MPI.COMM_SELF).particles
+    assert pb["m"].sum() == pytest.approx(pa["m"].sum() + 7500.0, rel=1e-12)
+    assert pb["m"][pb["mat"] != 0].sum() > 7500.0 and len(np.unique(pb["mat"])) == 3
+    panel = pb["body"] == names.index("c00_panel_n01")
+    assert np.average(pb["x"][panel, 1], weights=pb["m"][panel]) == pytest.approx(3.0, abs=0.01)

@@ -25,7 +25,6 @@ step loads by modal superposition (exact in time for a step: u = sum phi_i phi_i
 omega_i t) / omega_i^2 with mass-normalised modes; no time-integration error).
 """
 import csv
-import math
 import os
 import tomllib
 from dataclasses import dataclass, field
