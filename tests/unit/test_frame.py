@@ -206,3 +206,28 @@ def test_nodal_masses_add_exactly_their_mass_to_the_joint_panel():
     assert pb["m"][pb["mat"] != 0].sum() > 7500.0 and len(np.unique(pb["mat"])) == 3
     panel = pb["body"] == names.index("c00_panel_n01")
     assert np.average(pb["x"][panel, 1], weights=pb["m"][panel]) == pytest.approx(3.0, abs=0.01)
+
+
+def _edit(path, value):
+    def apply(data):
+        node = data["frame"]
+        for part in path[:-1]:
+            node = node[part]
+        node[path[-1]] = value
+        return data
+    return apply
+
+
+@pytest.mark.parametrize("edit,key,reason", [
+    (_edit(["nodes", 4, "name"], "n00"), "frame.nodes[4].name", "node name 'n00' is already used"),
+    (_edit(["supports", 0, "type"], "hinge"), "frame.supports[0].type", "must be one of fixed, pinned, roller"),
+    (_edit(["cut_ofset"], 0.1), "frame.cut_ofset", "unknown key"),
+    (_edit(["loads", 0, "node"], "n2"), "frame.loads[0].node", "no node named 'n2' (closest: n20, n21, n02)"),
+    (_edit(["members", 0, "cut_offsets"], [1.6, 1.6]), "frame.members[0].cut_offsets", "the end cuts of member 'c00' cross"),
+    (_edit(["masses"], [{"node": "n00", "mass": 1.0}]), "frame.masses[0].node", "needs a column under node 'n00'"),
+    (_edit(["members", 0, "material"], "stee"), "frame.members[0].material", "no material 'stee'"),
+])
+def test_frame_errors_name_the_entry(edit, key, reason):
+    with pytest.raises(ConfigError) as err:
+        expand_frame(edit(two_storey()))
+    assert err.value.key == key and reason in err.value.reason, str(err.value)
