@@ -141,7 +141,9 @@ def read_scene(path=SCENE, variant="elastic", track="upper_left_joint"):
     """
     with open(path, "rb") as fh:
         s = tomllib.load(fh)
-    if "frame" in s:  # written as a frame: read the ordinary scene it stands for (data only)
+    # written as a frame: read the strips pmpm's expansion generates (geometry only, no solver
+    # code; test_frame_frontend.py checks that they are the hand-written scene's strips)
+    if "frame" in s:
         from pmpm.scene.frame import expand_frame
         s = expand_frame(s)
     mat = dict(s["materials"]["steel"])
