@@ -348,8 +348,12 @@ def _nodal_masses(t, nodes, members, joints, bodies, materials):
         sp = m.strip
         area = sp.get("area") or (2 * sp["flange_width"] * sp["flange_thickness"]
                                   + (sp["depth"] - 2 * sp["flange_thickness"]) * sp["web_thickness"])
-        steel = area * (hi_y - lo_y) * materials[m.material]["density"]
-        derived[label] = dict(materials[m.material], density=materials[m.material]["density"] * (1 + mass / steel))
+        rho = materials[m.material].get("density") if isinstance(materials[m.material], dict) else None
+        if not isinstance(rho, (int, float)) or isinstance(rho, bool) or not rho > 0:
+            raise ConfigError(f"materials.{m.material}.density", "a positive number is needed for the "
+                                                                  "frame's nodal masses")
+        steel = area * (hi_y - lo_y) * rho
+        derived[label] = dict(materials[m.material], density=rho * (1 + mass / steel))
         x = body["start"][0]
         bodies[i] = dict(body, end=[x, lo_y])   # the member's body keeps its name and its start
         bodies.append(dict(body, name=f"{m.name}_panel_{node}", material=label, start=[x, lo_y], end=[x, hi_y]))

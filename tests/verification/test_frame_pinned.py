@@ -80,7 +80,8 @@ def test_the_cut_extrapolation_gives_the_fixed_base_moment(fixed):
 def test_pinned_base_carries_no_moment(pinned, fixed):
     for (pin, _), (_, fix_reaction) in zip(_base_moments(pinned), _base_moments(fixed)):
         ratio = np.abs(pin).max() / (LOAD_SCALE * np.abs(fix_reaction).max())
-        print(f"pinned base moment / fixed: {ratio:.4f}")
+        print(f"base moment: pinned {np.abs(pin).max() / 1e3:.3f} kN m, fixed (x {LOAD_SCALE:g}) "
+              f"{LOAD_SCALE * np.abs(fix_reaction).max() / 1e3:.2f} kN m, ratio {ratio:.4f}")
         assert ratio < 0.02
     # ... while the column above still bends: the cut's own moment is the shear times 0.2 m
     n, v, m = pinned["cuts"][:, pinned["cut_names"].index("left_column_left_base")].T
