@@ -1,4 +1,5 @@
-"""Command line: ``pmpm case.toml`` runs a scene; ``pmpm run|plot|export|bench ...`` the tools.
+"""Command line: ``pmpm case.toml`` runs a scene; ``pmpm run|plot|export|bench|expand ...`` the tools
+(``pmpm expand case.toml -o out.toml`` writes a scene's ``[frame]`` as the ordinary scene it stands for).
 
 ``pmpm --help`` lists the subcommands, ``pmpm <subcommand> --help`` their options.
 ``pmpm case.toml`` is short for ``pmpm run case.toml``: any first argument that is not a
@@ -198,10 +199,14 @@ def expand_case(args):
         if args.variant:
             data = apply_overrides(data, data["variants"][args.variant], f"variants.{args.variant}")
             data.pop("variants")
+        masses = bool(data.get("frame", {}).get("masses"))
         for name, overrides in data.get("variants", {}).items():
             if any(k == "frame" or k.startswith("frame.") for k in overrides):
                 raise ConfigError(f"variants.{name}", "changes the [frame] table: expand it with "
                                                       "--variant (an expanded file has no frame to change)")
+            if masses and any(k == "materials" or k.startswith("materials.") for k in overrides):
+                raise ConfigError(f"variants.{name}", "changes a material that the frame's nodal masses copy: "
+                                                      "expand it with --variant")
         if "frame" not in data:
             raise ConfigError(args.case, "has no [frame] table to expand")
         text = dumps(expand_frame(data), header=f"expanded by pmpm {__version__} from {os.path.basename(args.case)}"

@@ -21,7 +21,9 @@ in docs/scenes.md, "Frames"; in short:
   shared by mass; a member's ``load_per_length`` (N/m, times the node-to-node length) on the
   particles of its clear length;
 * two section cuts per member, named ``<member>_<node>``, at ``cut_offset`` from each clear
-  end; a tracked point per node, named after it.
+  end; a tracked point per node, named after it;
+* a nodal mass is added to the joint panel of the column under the node, split off as its own
+  strip of a denser copy of the column's material (``"<material>+<node>"``).
 """
 import copy
 import logging
@@ -60,6 +62,7 @@ class Member:
 
 
 def _node_table(t, tol):
+    """Node name -> (x, y), in the table's order; names unique, no two nodes at one point."""
     nodes = {}
     for k, n in enumerate(t.tables("nodes")):
         name = n.string("name")
@@ -87,6 +90,7 @@ def _node_ref(t, key, nodes):
 
 
 def _explicit_sections(t):
+    """``[frame.sections.<name>]``: strips given by their dimensions."""
     out = {}
     sec = t.table("sections", None)
     if sec is None:
@@ -123,6 +127,7 @@ def _strip(t, explicit, axis):
 
 
 def _member_table(t, nodes, explicit, materials, default_material, cut_offset, tol):
+    """The members, each oriented lower/left to upper/right, with its strip and cut offsets."""
     from pmpm.physics.timefunctions import parse_time_function
     members = []
     for k, m in enumerate(t.tables("members")):
@@ -245,12 +250,12 @@ def _check_geometry(members, geo, grid, tol):
                                                   f"{members[j].name!r} {why}")
 
 
-def _supports(t, nodes, members, joints, grid, tol):
+def _supports(t, nodes, members, joints, grid):
     """[[boundary]] tables of the supports (reactions recorded under the node's name)."""
     out = []
     h = grid.cell_size
     seen = set()
-    for k, s in enumerate(t.tables("supports")):
+    for s in t.tables("supports"):
         node = _node_ref(s, "node", nodes)
         kind = s.string("type", choices=SUPPORT_TYPES)
         free = s.string("direction", "x", choices=("x", "y")) if kind == "roller" else None
@@ -282,6 +287,7 @@ def _supports(t, nodes, members, joints, grid, tol):
 
 
 def _nodal_loads(t, nodes, joints, tol):
+    """A nodal load on the particles of the node's panel (a second load on a node gets its index)."""
     from pmpm.physics.timefunctions import parse_time_function
     out = []
     for k, f in enumerate(t.tables("loads")):
@@ -291,7 +297,8 @@ def _nodal_loads(t, nodes, joints, tol):
         time_function = parse_time_function(tf if tf is not None else Table({"type": "step"}, f.path("time_function")))
         f.finish()
         lo, hi = joints.panel(node, nodes[node])
-        out.append({"name": f"{node}_load" if not any(o["name"] == f"{node}_load" for o in out) else f"{node}_load{k}",
+        name = f"{node}_load" if not any(o["name"] == f"{node}_load" for o in out) else f"{node}_load{k}"
+        out.append({"name": name,
                     "lower": [lo[0] - tol, lo[1] - tol], "upper": [hi[0] + tol, hi[1] + tol],
                     "force": list(force), "time_function": time_function})
     return out
@@ -314,7 +321,47 @@ def _member_loads(members, geo, nodes, tol):
     return out
 
 
+def _nodal_masses(t, nodes, members, joints, bodies, materials):
+    """``[[frame.masses]]``: a lumped mass at a node becomes density. The joint panel of the
+    column under the node (the column over the beam depth) is split off as its own strip, of a
+    copy of the column's material whose density adds the mass to the panel's steel; the rest
+    of the column stays as it was. Returns the bodies and the derived materials
+    (``"<material>+<node>"``)."""
+    tables = t.tables("masses")
+    derived = {}
+    for entry in tables:
+        node = _node_ref(entry, "node", nodes)
+        mass = entry.number("mass", low=0, low_open=True)
+        entry.finish()
+        below = [i for i, m in enumerate(members) if m.vertical and m.hi == node]
+        if not below:
+            raise ConfigError(entry.path("node"), f"a nodal mass needs a column under node {node!r} "
+                                                  f"(it is added to that column's joint panel)")
+        i = below[0]
+        m, body = members[i], bodies[i]
+        label = f"{m.material}+{node}"
+        if label in derived:
+            raise ConfigError(entry.path("node"), f"node {node!r} has a mass already")
+        y = nodes[node][1]
+        half = (joints.beam[node] or m.strip["depth"]) / 2
+        lo_y, hi_y = y - half, body["end"][1]   # the column's body ends at the panel's top
+        sp = m.strip
+        area = sp.get("area") or (2 * sp["flange_width"] * sp["flange_thickness"]
+                                  + (sp["depth"] - 2 * sp["flange_thickness"]) * sp["web_thickness"])
+        rho = materials[m.material].get("density") if isinstance(materials[m.material], dict) else None
+        if not isinstance(rho, (int, float)) or isinstance(rho, bool) or not rho > 0:
+            raise ConfigError(f"materials.{m.material}.density", "a positive number is needed for the "
+                                                                  "frame's nodal masses")
+        steel = area * (hi_y - lo_y) * rho
+        derived[label] = dict(materials[m.material], density=rho * (1 + mass / steel))
+        x = body["start"][0]
+        bodies[i] = dict(body, end=[x, lo_y])   # the member's body keeps its name and its start
+        bodies.append(dict(body, name=f"{m.name}_panel_{node}", material=label, start=[x, lo_y], end=[x, hi_y]))
+    return bodies, derived
+
+
 def _cuts(members, geo, nodes, tol):
+    """Two cuts per member, ``<member>_<node>``, at its offsets from the clear ends."""
     out = []
     for m, g in zip(members, geo):
         c0, c1 = g["clear"]
@@ -394,14 +441,17 @@ def expand_frame(data):
     joints = _Joints(nodes, members)
     geo = _geometry(members, nodes, joints)
     _check_geometry(members, geo, grid, tol)
-    supports = _supports(t, nodes, members, joints, grid, tol)
+    supports = _supports(t, nodes, members, joints, grid)
     forces = _nodal_loads(t, nodes, joints, tol) + _member_loads(members, geo, nodes, tol)
-    t.finish()
     bodies = [{"name": m.name, "shape": "i_section", "material": m.material,
                "start": list(g["start"]), "end": list(g["end"]), **m.strip} for m, g in zip(members, geo)]
+    bodies, derived = _nodal_masses(t, nodes, members, joints, bodies, materials)
+    t.finish()
     tracks = [{"name": n, "point": list(p)} for n, p in nodes.items()]
     out = copy.deepcopy(data)
     del out["frame"]
+    if derived:
+        out["materials"] = dict(out["materials"], **derived)
     out["bodies"] = bodies + list(out.get("bodies", []))
     out["boundary"] = supports + list(out.get("boundary", []))
     if forces:
@@ -434,4 +484,6 @@ def frame_report(data):
             f"  {ns} supports with reactions: {names(out['boundary'], ns)}",
             f"  {nf} loads: {names(out.get('loads', {}).get('forces', []), nf)}",
             f"  {nc} section cuts: {names(out['output']['section'], nc)}",
-            f"  {nt} tracked points: {names(out['output']['track'], nt)}"]
+            f"  {nt} tracked points: {names(out['output']['track'], nt)}"] + (
+        [f"  {len(data['frame']['masses'])} nodal masses: on the joint panels of "
+         + ", ".join(m["node"] for m in data["frame"]["masses"])] if data["frame"].get("masses") else [])

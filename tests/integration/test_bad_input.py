@@ -300,11 +300,6 @@ CASES = {
                        "frame.members[0].to: member 'col' is inclined"),
     "frame-support-off-line": (frame(nodes=node("A", 3.0, 0.1) + node("B", 3.0, 1.5)), {}, ["--check"], 2,
                                "frame.supports[0].node: support node 'A' at y = 0.1 is not on a grid node line"),
-    "frame-node-twice": (frame(nodes=node("A", 3.0, 0.0) + node("B", 3.0, 1.5) + node("A", 3.0, 1.0)),
-                         {}, ["--check"], 2, "frame.nodes[2].name: node name 'A' is already used"),
-    "frame-typo": (frame(extra="cut_ofset = 0.1\n"), {}, ["--check"], 2, "frame.cut_ofset: unknown key"),
-    "frame-support-type": (frame(supports='[[frame.supports]]\nnode = "A"\ntype = "hinge"\n'), {},
-                           ["--check"], 2, "frame.supports[0].type: must be one of fixed, pinned, roller"),
 }
 
 

@@ -3,12 +3,12 @@ writer (toml_writer.py): the expansion rules of docs/scenes.md "Frames" on a two
 two-bay frame, the table against the AISC values and the plates' own geometry, the writer's
 round trip, and ``pmpm expand``."""
 import glob
-import math
 import os
 import subprocess
 import sys
 import tomllib
 
+import numpy as np
 import pytest
 
 from pmpm.errors import ConfigError
@@ -184,3 +184,50 @@ def test_expand_command_refuses_bad_input_and_writes_nothing(tmp_path):
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert proc.stderr.startswith("pmpm: error: case.toml: frame.members[2].section: unknown section 'W16x63x'")
     assert sorted(os.listdir(tmp_path)) == ["case.toml"]
+
+
+def test_nodal_masses_add_exactly_their_mass_to_the_joint_panel():
+    """[[frame.masses]]: the panel under the node is split off with a denser copy of the
+    material; the particles' total mass grows by exactly the masses, and the mass sits in the
+    panel (its centroid is the node's height)."""
+    from mpi4py import MPI
+    from pmpm.core.solver import Solver
+    plain = two_storey()
+    heavy = two_storey(masses=[{"node": "n01", "mass": 5000.0}, {"node": "n12", "mass": 2500.0}])
+    out = expand_frame(heavy)
+    names = [b["name"] for b in out["bodies"]]
+    assert {"c00_panel_n01", "c11_panel_n12"} <= set(names) and "steel+n01" in out["materials"]
+    assert out["materials"]["steel+n01"]["E"] == 2e11
+    for data in (plain, heavy):
+        data["particles_per_cell"] = 3   # 11 rows across W14X90 at 0.1 m cells (7 cannot carry its I)
+    pa = Solver(parse_scene(plain), MPI.COMM_SELF).particles
+    pb = Solver(parse_scene(heavy), MPI.COMM_SELF).particles
+    assert pb["m"].sum() == pytest.approx(pa["m"].sum() + 7500.0, rel=1e-12)
+    assert pb["m"][pb["mat"] != 0].sum() > 7500.0 and len(np.unique(pb["mat"])) == 3
+    panel = pb["body"] == names.index("c00_panel_n01")
+    assert np.average(pb["x"][panel, 1], weights=pb["m"][panel]) == pytest.approx(3.0, abs=0.01)
+
+
+def _edit(path, value):
+    def apply(data):
+        node = data["frame"]
+        for part in path[:-1]:
+            node = node[part]
+        node[path[-1]] = value
+        return data
+    return apply
+
+
+@pytest.mark.parametrize("edit,key,reason", [
+    (_edit(["nodes", 4, "name"], "n00"), "frame.nodes[4].name", "node name 'n00' is already used"),
+    (_edit(["supports", 0, "type"], "hinge"), "frame.supports[0].type", "must be one of fixed, pinned, roller"),
+    (_edit(["cut_ofset"], 0.1), "frame.cut_ofset", "unknown key"),
+    (_edit(["loads", 0, "node"], "n2"), "frame.loads[0].node", "no node named 'n2' (closest: n20, n21, n02)"),
+    (_edit(["members", 0, "cut_offsets"], [1.6, 1.6]), "frame.members[0].cut_offsets", "the end cuts of member 'c00' cross"),
+    (_edit(["masses"], [{"node": "n00", "mass": 1.0}]), "frame.masses[0].node", "needs a column under node 'n00'"),
+    (_edit(["members", 0, "material"], "stee"), "frame.members[0].material", "no material 'stee'"),
+])
+def test_frame_errors_name_the_entry(edit, key, reason):
+    with pytest.raises(ConfigError) as err:
+        expand_frame(edit(two_storey()))
+    assert err.value.key == key and reason in err.value.reason, str(err.value)

@@ -141,7 +141,9 @@ def read_scene(path=SCENE, variant="elastic", track="upper_left_joint"):
     """
     with open(path, "rb") as fh:
         s = tomllib.load(fh)
-    if "frame" in s:  # written as a frame: read the ordinary scene it stands for (data only)
+    # written as a frame: read the strips pmpm's expansion generates (geometry only, no solver
+    # code; test_frame_frontend.py checks that they are the hand-written scene's strips)
+    if "frame" in s:
         from pmpm.scene.frame import expand_frame
         s = expand_frame(s)
     mat = dict(s["materials"]["steel"])
@@ -311,6 +313,13 @@ class FrameFE:
     def _fixed_dofs(self):
         dofs = []
         for (x0, y0), (x1, y1) in self.data.fixed_boxes:
+            if (x0, y0) == (x1, y1):
+                # a point (a pin, pmpm's frame front end: the grid node nearest the member
+                # axis): the mesh vertex nearest to it, which lies on the member's axis
+                p = self.basis.mesh.p
+                k = int(np.argmin((p[0] - x0) ** 2 + (p[1] - y0) ** 2))
+                dofs.append(self.basis.nodal_dofs[:, k])
+                continue
             d = self.basis.get_dofs(lambda x: (x[0] >= x0 - 1e-9) & (x[0] <= x1 + 1e-9)
                                     & (x[1] >= y0 - 1e-9) & (x[1] <= y1 + 1e-9))
             dofs.append(d.all())

@@ -12,6 +12,7 @@ from mpi4py import MPI
 
 from pmpm.core.solver import Solver
 from pmpm.io.tracking import Tracker
+from pmpm.results.recorder import StructuralRecorder
 from pmpm.scene.config import apply_overrides, parse_scene, read_toml
 
 SCENE = "cases/portal_frame.toml"
@@ -29,7 +30,7 @@ def base_moments(s, y0=0.1, y1=0.3):
     return out
 
 
-def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE):
+def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE, supports=None, load_scale=1.0):
     """The scene's ``variant``, with mass-proportional ``damping`` (1/s) through its
     ``loads.damping`` key when non-zero (validated like any scene file), and optionally cells of
     ``cell_size`` over the same domain (x in [-0.5, 6.6], y in [0, 4.2])."""
@@ -37,6 +38,11 @@ def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE):
     data = apply_overrides(data, data["variants"][variant], f"variants.{variant}")
     if damping:
         data = apply_overrides(data, {"loads": {"damping": float(damping)}}, "test")
+    if supports or load_scale != 1.0:  # the frame's support type, its nodal loads scaled
+        for s in data["frame"]["supports"]:
+            s["type"] = supports or s["type"]
+        for f in data["frame"].get("loads", []):
+            f["force"] = [load_scale * c for c in f["force"]]
     if cell_size:
         extent = [h * n for h, n in zip([data["grid"]["cell_size"]] * 2, data["grid"]["cells"])]
         cells = [int(round(e / cell_size)) for e in extent]
@@ -46,13 +52,14 @@ def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE):
 
 
 @lru_cache(maxsize=None)
-def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None, scene=SCENE):
+def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None, scene=SCENE, supports=None, load_scale=1.0):
     """Run the frame serially to ``t_end`` and sample every ``every`` steps: time, the upper-left
     joint's ux, base moments and energies; the solver is returned for its final state."""
-    scene = frame_scene(variant, damping, cell_size, scene)
+    scene = frame_scene(variant, damping, cell_size, scene, supports, load_scale)
     s = Solver(scene, MPI.COMM_SELF)
     tr = Tracker([t for t in scene.output.track if t.name == "upper_left_joint"], s)
-    t, ux, moments, energies = [], [], [], []
+    rec = StructuralRecorder(s)
+    t, ux, moments, energies, cuts, reactions = [], [], [], [], [], []
     while s.t < t_end:
         s.step()
         if s.step_count % every == 0:
@@ -60,5 +67,9 @@ def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None, scene=SCENE
             ux.append(tr.sample()[0, 0])
             moments.append(base_moments(s))
             energies.append(s.energies())
+            c, r = rec.sample()
+            cuts.append(c.copy())
+            reactions.append(r.copy())
     return {"t": np.array(t), "ux": np.array(ux), "moments": np.array(moments),
-            "energies": energies, "solver": s}
+            "energies": energies, "solver": s, "cut_names": [c.name for c in s.sections],
+            "cuts": np.array(cuts), "reaction_names": list(rec.reaction_names), "reactions": np.array(reactions)}
