@@ -11,8 +11,9 @@ the grid). The body's mass stays until then.
 
 Energy (pmpm.core.solver energies, ``removed_energy``): the grid sees s sigma, while the
 internal work integrates the particles' own sigma : de; the difference, (1 - s) sigma : de V
-summed over the body's particles each step of the fade, is work the fading member did not do
-on the rest, and is taken from ``removed_energy``. When the particles leave, their kinetic
+summed over the body's particles each step of the fade (sigma by the internal work's own
+trapezoid rule), is work the fading member did not do on the rest, and is taken from
+``removed_energy``. When the particles leave, their kinetic
 energy and their share of the internal work (strain energy plus plastic work, as the
 particles hold them) move from the kinetic energy and the internal work to ``removed_energy``.
 So kinetic + internal work + damping works + removed energy stays the initial energy plus the
@@ -61,21 +62,27 @@ class RemoveBody:
 
     def scale_force_stress(self, particles, stress, t):
         """Scale the body's rows of the force stress ``stress`` (N, 3; a copy the caller owns)
-        by the factor at ``t``; remember what was held back for the energy balance."""
+        by the factor at ``t``; remember what was held back for the energy balance: the
+        share 1 - s, the rows, the particles' own stress there and the force stress's excess
+        over it (the viscous stress of Rayleigh damping, if any)."""
         rows = np.flatnonzero(particles["body"] == self.body)
         s = self.factor(t)
-        held_back = (1.0 - s) * stress[rows]
+        own = particles["stress"][rows, :3].copy()
+        self._released = (1.0 - s, rows, own, stress[rows] - own)
         stress[rows] *= s
-        self._released = (rows, held_back)
 
     def released_work(self, particles, de):
-        """sum (1 - s) sigma_force : de V over the body's particles for the step's strain
-        increment ``de`` (the work the fading stress did not pass on); 0 if nothing faded."""
+        """The work the fading stress did not pass on over the step of strain increment ``de``:
+        (1 - s) sum V (sigma_mean + sigma_v) : de over the body's particles, sigma_mean the
+        mean of their stress before and after the step's update (the trapezoid rule of the
+        internal work, pmpm.core.solver.update_stress) and sigma_v the viscous stress that
+        acted; call it after the stress update. 0 if nothing faded this step."""
         if self._released is None:
             return 0.0
-        rows, held_back = self._released
+        share, rows, before, viscous = self._released
         self._released = None
-        return float(np.sum(particles["vol"][rows] * np.einsum("pk,pk->p", held_back, de[rows])))
+        acting = 0.5 * (before + particles["stress"][rows, :3]) + viscous
+        return share * float(np.sum(particles["vol"][rows] * np.einsum("pk,pk->p", acting, de[rows])))
 
     def due(self, t_next):
         """True when the particles are to leave at the end of a step ending at ``t_next``."""
