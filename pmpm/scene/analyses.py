@@ -48,7 +48,7 @@ def parse_pushover(t, scene):
         raise ConfigError(t.path("base"), "needs the base reactions (output.reactions = true or a boundary's "
                                           "reaction = true)")
     hinges = t.integer("hinges", None, low=1)
-    fraction = t.number("hinge_fraction", 0.9, low=0.0, high=1.0, low_open=True)
+    fraction = t.number("hinge_fraction", 1.0, low=0.0, high=1.0, low_open=True)
     t.finish()
     return {"boundary": name, "displacement": displacement, "duration": duration, "ramp": ramp,
             "control": control, "base": tuple(base), "hinges": hinges, "hinge_fraction": fraction}
