@@ -372,6 +372,8 @@ class Run:
         s.viscous_damping_work = float(attrs.get("viscous_damping_work", 0.0)) if self.rank == 0 else 0.0
         s.removed_energy = float(attrs.get("removed_energy", 0.0)) if self.rank == 0 else 0.0
         s.removed = int(attrs.get("removed", 0))
+        for event in s.events:  # a body removed before the checkpoint is not in it
+            event.done = s.t >= event.time + event.duration * (1 - 1e-12)
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
 
@@ -538,6 +540,9 @@ class Run:
             out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
         if s.ground is not None:
             out.append(s.ground.describe())
+        if s.pushover is not None:
+            out.append(s.pushover.describe())
+        out += [e.describe() for e in s.events]
         if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
             out.append(s.describe())
         return out

@@ -167,6 +167,8 @@ def _effect_scenes(n, record):
         "gravity": block_scene(n, gravity=True),
         "force (step)": block_scene(n, force=True),
         "damping": block_scene(n, extra_loads={"damping": 0.5}),
+        # the step's own cost of the stiffness part (the shorter stable step is not in it)
+        "Rayleigh damping (ratio)": block_scene(n, extra_loads={"damping": {"ratio": 0.02, "periods": [1.0, 0.2]}}),
         "ground motion": block_scene(n, extra_loads=gm),
         "large rotations": block_scene(n, extra_solver={"large_rotations": True}),
         "large rotations (Green-Naghdi)": block_scene(n, extra_solver={"objective_rate": "green_naghdi"}),

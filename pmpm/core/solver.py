@@ -32,6 +32,8 @@ from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.core.grid import Grid, GridWindow, choose_tile
 from pmpm.physics.damping import RayleighDamping, undamped_cfl_limit
 from pmpm.physics.groundmotion import GroundMotion
+from pmpm.physics.events import make_events
+from pmpm.physics.pushover import Pushover
 from pmpm.physics.loads import Loads
 from pmpm.physics.materials import make_material
 from pmpm.core.schemes import make_scheme
@@ -135,6 +137,8 @@ class Solver:
         check_boundaries(scene.boundaries, self.grid)
         self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
                        if scene.loads.ground_motion else None)
+        self.pushover = Pushover(scene.pushover, scene.boundaries) if scene.pushover else None
+        self.events = make_events(scene.events, scene.bodies)   # [] without [[events]]
         # Rayleigh damping by ratio: its mass part is the nodal mass-proportional damping, its
         # stiffness part a viscous stress on the particles (None: neither exists in the step)
         self.rayleigh = (RayleighDamping(scene.loads.rayleigh, self.materials)
@@ -225,6 +229,8 @@ class Solver:
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
         if self.ground is not None:
             self.ground.bind(self.window)
+        if self.pushover is not None:
+            self.pushover.bind(self.window)
 
     def _halo_columns(self):
         """Window columns at the lower and upper end that the halo exchange reads or writes:
@@ -306,12 +312,20 @@ class Solver:
 
     def force_stress(self):
         """The stress whose divergence is the internal force: the particles' stress, plus the
-        viscous stress of Rayleigh damping when the scene asks for it."""
+        viscous stress of Rayleigh damping when the scene asks for it, with the rows of a body
+        being removed scaled down (pmpm.physics.events). Without either, the stress itself."""
         p = self.particles
-        if self.rayleigh is None:
+        fading = [e for e in self.events if e.active(self.t)] if self.events else ()
+        if self.rayleigh is None and not fading:
             return p["stress"]
-        return self.rayleigh.force_stress(p["stress"], p[self.rayleigh.FIELD],
-                                          self._scratch("_force_stress_buf", (p.n, 3)))
+        out = self._scratch("_force_stress_buf", (p.n, 3))
+        if self.rayleigh is not None:
+            self.rayleigh.force_stress(p["stress"], p[self.rayleigh.FIELD], out)
+        else:
+            out[...] = p["stress"][:, :3]
+        for event in fading:
+            event.scale_force_stress(p, out, self.t)
+        return out
 
     def exchange_halo(self, fields):
         """HALO: every rank's contributions summed in the owned and the ghost columns alike
@@ -324,6 +338,8 @@ class Solver:
         w = self.window
         if self.ground is not None:
             self.ground.apply(w, self.t + dt)
+        if self.pushover is not None:
+            self.pushover.apply(w, self.t + dt)
         react = self.reactions.kernel_arg() if self.reactions is not None else None
         damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
                                           0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
@@ -427,6 +443,8 @@ class Solver:
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         if self.rayleigh is not None:
             self.rayleigh.update(p, self._de, self._dt_step)
+        for event in self.events:  # what a fading body's stress did not pass to the grid
+            self.removed_energy -= event.released_work(p, self._de)
 
     def _rotate(self, t):
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
@@ -503,6 +521,31 @@ class Solver:
         self.removed += int(self.decomp.allreduce_sum(int((~keep).sum())))
         self.particles = self.particles.take(keep)
 
+    def remove_body(self, event):
+        """The particles of an event's body leave the run (collective: every rank at the same
+        step). Their kinetic energy, strain energy and plastic work move to ``removed_energy``
+        (the latter two out of the internal work, which they had entered)."""
+        p = self.particles
+        gone = event.leaving(p)
+        part = p.take(gone)
+        kinetic = K.kinetic_energy(part["m"], part["v"])
+        several = len(self.materials) > 1
+        held = sum(K.elastic_energy(part["stress"], part["vol"], m.E, m.nu, part["mat"], k if several else -1)
+                   for k, m in enumerate(self.materials) if not m.needs_deformation_gradient)
+        held += sum(m.strain_energy(part["F"], part["vol0"], part["mat"], k if several else -1)
+                    for k, m in enumerate(self.materials) if m.needs_deformation_gradient)
+        if "plastic_work" in part:
+            held += float(np.sum(part["plastic_work"] * part["vol"]))
+        self.removed_energy += kinetic + held
+        self.internal_work -= held
+        self.particles = p.take(~gone)
+        event.done = True
+        count = int(self.decomp.allreduce_sum(int(gone.sum())))
+        mass = self.decomp.allreduce_sum(float(part["m"].sum()))
+        self.removed_by_events = getattr(self, "removed_by_events", 0) + count
+        if self.decomp.rank == 0:
+            logger.info("t = %.6g s: body %r removed (%d particles, %.6g kg)", self.t, event.name, count, mass)
+
     def outside_report(self, limit=5):
         """'id (x, y)' of particles outside the grid, from every rank (rank 0 gets the text)."""
         p = self.particles
@@ -563,6 +606,9 @@ class Solver:
         self.migrate(leaving)
         self.t += dt
         self.step_count += 1
+        for event in self.events:
+            if event.due(self.t):
+                self.remove_body(event)
         if self.step_count % self.scene.parallel.rebalance_interval == 0:
             self.rebalance()
         self.dt = self.stable_dt(self.vmax)

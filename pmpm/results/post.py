@@ -75,6 +75,8 @@ def structural_outputs(h5_path, outdir):
                 made.append(plots.plot_hinge_map(h5_path, tables["sections"], png("hinges"), stem))
         if tables["reactions"]:
             made.append(plots.plot_reactions(tables["reactions"], png("reactions"), stem))
+            from pmpm.results.capacity import write_capacity  # a pushover's capacity curve
+            made += write_capacity(h5_path, outdir)
         spec = _hysteresis_spec(h5_path)
         if spec and tables["reactions"]:
             made.append(plots.plot_hysteresis(h5_path, tables["reactions"], spec, png("hysteresis"), stem))

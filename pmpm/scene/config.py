@@ -180,6 +180,8 @@ class Scene:
     parallel: ParallelConfig
     contact: Optional[ContactConfig] = None
     stop: tuple = ()          # StopConfig
+    pushover: Optional[dict] = None   # [pushover] (pmpm.scene.analyses, pmpm.physics.pushover)
+    events: tuple = ()        # [[events]] (pmpm.scene.analyses, pmpm.physics.events)
     variants: dict = field(default_factory=dict)
     variant: str = ""
 
@@ -780,6 +782,9 @@ def parse_scene(data, path="<scene>"):
     if scene.contact is not None and solver.interpolation != "point":
         raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
     _check_hysteresis(scene)
+    from pmpm.scene.analyses import parse_events, parse_pushover
+    scene = dataclasses.replace(scene, pushover=parse_pushover(root.table("pushover", None), scene))
+    scene = dataclasses.replace(scene, events=parse_events(root, scene))
     if scene.output.directory is None:
         scene = dataclasses.replace(scene, output=dataclasses.replace(scene.output, directory=f"{stem}_results"))
     root.finish()

@@ -211,6 +211,21 @@ CASES = {
                             "loads.damping.periods: must be two periods > 0"),
     "damping-period-negative-run": (add('[loads]\ndamping = {ratio = 0.05, periods = [-0.1, 0.05]}'), {}, [], 2,
                                     "loads.damping.periods: must be two periods > 0"),
+    # 4c. pushover and events (issue 23)
+    "pushover-no-boundary": (add('[pushover]\ndisplacement = 0.1'), {}, ["--check"], 2,
+                             "pushover.boundary: missing (required)"),
+    "pushover-no-control": (add('[[boundary]]\nname = "push"\ntype = "roller_y"\nlower = [0.0, 0.0]\n'
+                                'upper = [0.0, 1.0]\n[pushover]\nboundary = "push"\ndisplacement = 0.1'),
+                            {}, ["--check"], 2, "pushover.control: missing (required)"),
+    "pushover-fixed-boundary": (add('[[boundary]]\nname = "base"\ntype = "fixed"\nlower = [0.0, 0.0]\n'
+                                    'upper = [4.0, 0.0]\n[pushover]\nboundary = "base"\ndisplacement = 0.1'),
+                                {}, ["--check"], 2, "pushover.boundary: boundary 'base' is 'fixed'"),
+    "event-unknown-body": (add('[[events]]\nbody = "column"\ntime = 0.001'), {}, ["--check"], 2,
+                           "events[0].body: no body named 'column'"),
+    "event-beyond-end": (add('[[events]]\nbody = "block"\ntime = 0.02'), {}, ["--check"], 2,
+                         "events[0].time: the removal ends at 0.02 s, not before solver.end_time"),
+    "event-beyond-end-run": (add('[[events]]\nbody = "block"\ntime = 0.005\nduration = 0.01'), {}, [], 2,
+                             "events[0].time: the removal ends at 0.015 s"),
     # 5. geometry
     "polygon-bow-tie": (body('shape = "polygon"\nvertices = [[2.5, 0.5], [3.5, 1.5], [3.5, 0.5], [2.5, 1.5]]'),
                         {}, ["--check"], 2, "bodies[1].vertices:"),

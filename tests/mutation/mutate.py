@@ -122,8 +122,8 @@ MUTATIONS = [
          tests=[[KERNELS + "::test_g2p_velocity_matches_reference"]],
          why="the FLIP and PIC weights of the velocity update exchanged"),
     dict(name="cfl_without_particle_speed", file="pmpm/core/solver.py",
-         original="return self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)",
-         replacement="return self.scene.solver.cfl * self.grid.h / self.wave_speed",
+         original="dt = self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)",
+         replacement="dt = self.scene.solver.cfl * self.grid.h / self.wave_speed",
          tests=[[PHASES + "::test_cfl_step_is_c_h_over_wave_speed_plus_particle_speed"]],
          why="the CFL step ignores the particle speed"),
     dict(name="mass_cutoff_ignored", file="pmpm/core/kernels/grid_ops.py",
@@ -267,6 +267,17 @@ MUTATIONS = [
          replacement="    pass  # mutated: no agreement",
          tests=[["tests/unit/test_mpi_failures_do_not_hang.py::test_with_x_a_failure_on_one_rank_stops_every_rank"]],
          why="under mpirun a failure on one rank is not a failure on the others (-x leaves them hanging)"),
+    dict(name="viscous_work_dropped", file="pmpm/core/kernels/damping.py",
+         original="        work += vol[p] * (sv[p, 0] * de[p, 0] + sv[p, 1] * de[p, 1] + sv[p, 2] * de[p, 2])",
+         replacement="        work += 0.0",
+         tests=[["tests/unit/test_damping.py::test_viscous_kernel_matches_its_numpy_twin",
+                 "tests/unit/test_damping.py::test_cantilever_decays_at_the_asked_ratio"]],
+         why="the viscous stress of Rayleigh damping dissipates energy the balance never counts"),
+    dict(name="removal_energy_not_moved", file="pmpm/core/solver.py",
+         original="        self.removed_energy += kinetic + held\n",
+         replacement="        self.removed_energy += held\n",
+         tests=[["tests/unit/test_events.py::test_energy_balance_closes_with_the_removed_energy"]],
+         why="the kinetic energy of the removed body's particles vanishes from the balance"),
 ]
 
 

@@ -1,0 +1,173 @@
+"""Sudden column loss (cases/hard/column_loss.toml) at several cell sizes (issue 23, item 3).
+
+Each cell size runs the case in-process on one rank through the Python API (the grid's cell
+count scaled to the same extent; the bodies regenerate their strips at each cell size).
+Reported per cell size, for the point on the beam's axis above the removed column:
+
+- the peak vertical displacement (most negative uy) and its time;
+- the permanent displacement: the mean of uy over 0.16 to 0.20 s (40 ms, about one period of
+  the double span's vertical mode, which the light damping has not yet stilled; the same window
+  at every cell size);
+- arrest or collapse: arrested when the point's speed falls back below 5% of its peak speed
+  after the peak and the displacement stays within 1.5 times the peak over the rest of the run;
+- the beams' section forces at the cut 0.3 m left of the removed column and at the left end:
+  the axial force N and moment M before the removal (t = 0.079 s) and at the peak, and the
+  largest tension and compression after the removal (catenary action shows as tension);
+- the energy balance's largest gap (kinetic + internal work + damping works + removed energy -
+  external work), relative to the external work at the end.
+
+Then the relative difference of the two finest runs' peak and permanent displacements, a
+Markdown table, and one JSON line (also written to ``--out``). ``--histories FILE.npz`` keeps
+t, uy and the cuts' N, M per cell size for the plot (``--plot PNG`` draws it).
+
+A finer grid can be run on several ranks with the command line and read back here:
+``--results H=FILE.h5`` (repeatable) summarises a results file written at cell size H (the
+scene's copy with ``cell_size`` and ``cells`` changed; ``end_time`` at least 0.2 s).
+
+Run::
+
+    python -m pmpm.benchmarks.studies.column_loss --cells 0.1 0.05 --out /tmp/column_loss.json \
+        --histories /tmp/column_loss.npz --plot docs/column_loss_history.png
+    # 0.025 m on two ranks (about 30 minutes on this machine, loaded), then read back:
+    mpirun -n 2 pmpm /tmp/cl025/column_loss.toml
+    python -m pmpm.benchmarks.studies.column_loss --cells 0.05 \
+        --results 0.025=/tmp/cl025/column_loss_results/column_loss.h5 --plot docs/column_loss_history.png
+"""
+import argparse
+import json
+import math
+import os
+import time
+
+import numpy as np
+
+__all__ = ["run_cell", "summarise", "main"]
+
+CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "hard", "column_loss.toml")
+TRACK = "above_removed"
+CUTS = ("beam_mid_left", "beam_left_end")
+EXTENT = (13.2, 4.2)    # the case's grid: 264 x 84 cells of 0.05 m
+#: the permanent displacement is the mean over this window (s)
+PERMANENT_WINDOW = (0.16, 0.20)
+
+
+def run_cell(h, overrides=None, comm=None):
+    """Run the case at cell size ``h``; returns the API Result and the wall time."""
+    import pmpm
+    ov = {"grid.cell_size": h, "grid.cells": [int(round(EXTENT[0] / h)), int(round(EXTENT[1] / h))]}
+    ov.update(overrides or {})
+    t0 = time.perf_counter()
+    r = pmpm.run(CASE, overrides=ov, dataframes=False, comm=comm)
+    return r, time.perf_counter() - t0
+
+
+def summarise(r, removal_time=0.08):
+    """The figures of the module doc from one Result."""
+    h = r.histories[TRACK]
+    t, uy, vy = (np.asarray(h[c]) for c in ("time", "uy", "vy"))
+    k = int(np.argmin(uy))
+    after = t > t[k]
+    speed = np.abs(vy)
+    peak_speed = float(speed[t > removal_time].max())
+    arrested = bool(after.any() and speed[after].min() < 0.05 * peak_speed
+                    and uy[after].min() > 1.5 * uy[k])
+    last = (t >= PERMANENT_WINDOW[0]) & (t <= PERMANENT_WINDOW[1])
+    before = int(np.argmin(np.abs(t - (removal_time - 0.001))))
+    cuts = {}
+    for name in CUTS:
+        N, M = np.asarray(r.sections[name]["N"]), np.asarray(r.sections[name]["M"])
+        post = t > removal_time
+        cuts[name] = {"N_before": float(N[before]), "M_before": float(M[before]), "N_peak": float(N[k]),
+                      "M_peak": float(M[k]), "N_max_tension": float(np.nanmax(N[post])),
+                      "N_max_compression": float(np.nanmin(N[post]))}
+    e = r.energies
+    held = (np.asarray(e["kinetic"]) + e["internal_work"] + e["damping_work"] + e["viscous_damping_work"]
+            + e["removed_energy"] - e["external_work"])
+    return {"peak_uy": float(uy[k]), "t_peak": float(t[k]), "permanent_uy": float(uy[last].mean()),
+            "uy_before": float(uy[before]), "arrested": arrested, "peak_speed": peak_speed, "cuts": cuts,
+            "energy_gap": float(np.abs(held - held[0]).max() / abs(e["external_work"][-1])),
+            "removed_energy": float(e["removed_energy"][-1]), "steps": r.summary["steps"],
+            "particles": r.summary["particles"]}
+
+
+def plot(histories, path):
+    """uy above the removed column and N, M at the mid cut against time, per cell size."""
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(8, 8), layout="constrained")
+    ax = fig.subplots(3, 1, sharex=True)
+    for h, d in sorted(histories.items(), reverse=True):
+        ax[0].plot(d["t"], d["uy"] * 1e3, lw=1, label=f"{h:g} m cells")
+        ax[1].plot(d["t"], d["N_" + CUTS[0]] / 1e3, lw=1, label=f"{h:g} m cells")
+        ax[2].plot(d["t"], d["M_" + CUTS[0]] / 1e3, lw=1, label=f"{h:g} m cells")
+    for a in ax:
+        a.axvspan(0.08, 0.085, color="0.85", label="column removed")
+        a.grid(True, alpha=0.3)
+    ax[0].set_ylabel("uy above the column (mm)")
+    ax[1].set_ylabel(f"N at {CUTS[0]} (kN)\n(tension +)")
+    ax[2].set_ylabel(f"M at {CUTS[0]} (kN m)")
+    ax[2].set_xlabel("time (s)")
+    ax[0].legend(loc="lower left", fontsize=8)
+    ax[0].set_title("sudden loss of the middle column: two-bay portal, 30 kN/m floor load")
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cells", type=float, nargs="+", default=[0.1, 0.05])
+    ap.add_argument("--out")
+    ap.add_argument("--histories")
+    ap.add_argument("--plot")
+    ap.add_argument("--results", action="append", default=[], metavar="H=FILE.h5",
+                    help="summarise a results file of cell size H instead of running it")
+    args = ap.parse_args(argv)
+    results, histories = {}, {}
+    import pmpm
+    given = {float(a.split("=", 1)[0]): a.split("=", 1)[1] for a in args.results}
+    for h in list(args.cells) + sorted(given):
+        if h in given:
+            r, wall = pmpm.load_results(given[h], dataframes=False), math.nan
+            r.summary = {"steps": math.nan, "particles": len(r.frames["id"][0])}
+        else:
+            r, wall = run_cell(h)
+        s = summarise(r)
+        s["wall"] = wall
+        results[h] = s
+        d = {"t": np.asarray(r.histories[TRACK]["time"]), "uy": np.asarray(r.histories[TRACK]["uy"])}
+        for name in CUTS:
+            d["N_" + name] = np.asarray(r.sections[name]["N"])
+            d["M_" + name] = np.asarray(r.sections[name]["M"])
+        histories[h] = d
+        print(f"h = {h:g} m: peak uy {s['peak_uy'] * 1e3:.2f} mm at {s['t_peak']:.4f} s, permanent "
+              f"{s['permanent_uy'] * 1e3:.2f} mm, before removal {s['uy_before'] * 1e3:.3f} mm, "
+              f"{'arrested' if s['arrested'] else 'NOT arrested'}; energy gap {s['energy_gap']:.2e} of the "
+              f"external work; {s['particles']} particles, {s['steps']} steps, {wall:.0f} s", flush=True)
+        for name, c in s["cuts"].items():
+            print(f"   {name}: before N {c['N_before'] / 1e3:.1f} kN M {c['M_before'] / 1e3:.1f} kN m; at the peak "
+                  f"N {c['N_peak'] / 1e3:.1f} kN M {c['M_peak'] / 1e3:.1f} kN m; after removal N from "
+                  f"{c['N_max_compression'] / 1e3:.1f} to {c['N_max_tension'] / 1e3:.1f} kN", flush=True)
+    out = {"cells": {str(h): s for h, s in results.items()}}
+    if len(results) >= 2:
+        a, b = sorted(results)[:2]
+        out["peak_difference"] = abs(results[a]["peak_uy"] / results[b]["peak_uy"] - 1)
+        out["permanent_difference"] = abs(results[a]["permanent_uy"] / results[b]["permanent_uy"] - 1)
+        print(f"finest two ({a:g}, {b:g} m): peak differs by {100 * out['peak_difference']:.2f}%, permanent by "
+              f"{100 * out['permanent_difference']:.2f}%")
+    print("| cells (m) | peak uy (mm) | at (s) | permanent uy (mm) | arrested | energy gap |")
+    print("|---|---|---|---|---|---|")
+    for h, s in sorted(results.items(), reverse=True):
+        print(f"| {h:g} | {s['peak_uy'] * 1e3:.2f} | {s['t_peak']:.4f} | {s['permanent_uy'] * 1e3:.2f} | "
+              f"{'yes' if s['arrested'] else 'no'} | {s['energy_gap']:.1e} |")
+    if args.histories:
+        np.savez(args.histories, **{f"{h:g}/{k}": v for h, d in histories.items() for k, v in d.items()})
+    if args.plot:
+        plot(histories, args.plot)
+    line = json.dumps(out)
+    print(line)
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(line + "\n")
+
+
+if __name__ == "__main__":
+    main()
