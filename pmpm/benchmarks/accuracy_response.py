@@ -13,11 +13,11 @@ cell size, ``mpm_track_point``). Reported per setting:
   first period from t = 0), each against the FE's peak of the same cycle (%), and the worst;
 * **period**: the mean spacing of the upward crossings of the record's mean, against the FE's
   same estimator (%);
-* **numerical damping**: the energy lost per cycle (the run's ``numerical_loss``, pmpm.core.solver)
-  as an equivalent viscous damping ratio, zeta = (loss / cycles) / (4 pi E_osc), with E_osc the
-  energy of the sway about the static state, half the load's mean work over the record (an
-  undamped oscillator under a step load F has E_osc = F u_static / 2 and loses 4 pi zeta E_osc
-  per cycle to viscous damping zeta); and the energy lost over the record as a fraction of the
+* **numerical damping**: the energy lost (the run's ``numerical_loss``, pmpm.core.solver) as an
+  equivalent viscous damping ratio: an oscillator under a step load F, with viscous damping
+  zeta, keeps e^(-4 pi zeta n) of its sway energy E_osc = F u_static / 2 after n cycles, so
+  zeta = -ln(1 - loss / E_osc) / (4 pi n), E_osc taken as half the load's mean work over the
+  record's whole cycles; and the energy lost over the record as a fraction of the
   elastic energy F u_static / 2 (the main job's 0.3% limit);
 * **cost**: the wall (and CPU) time of ``solver.step()`` alone on one core, after a warm-up that
   compiles the kernels.
@@ -201,7 +201,9 @@ def analyse(run, fe_u, fe_period, u_static, cycles):
         "period_ms": period * 1e3, "fe_period_ms": fe_period_est * 1e3,
         "period_error": (period - fe_period_est) / fe_period_est,
         "loss_J": loss, "loss_of_elastic": loss / elastic,
-        "zeta": loss / n_cycles / (4 * math.pi * e_osc) if e_osc > 0 else math.nan,
+        # a viscous oscillator keeps e^(-4 pi zeta n) of its sway energy after n cycles
+        "zeta": (-math.log(1 - loss / e_osc) / (4 * math.pi * n_cycles)
+                 if e_osc > 0 and loss < e_osc else math.nan),
     })
     return row
 
@@ -298,7 +300,8 @@ def study(settings, t_end, fe_level, outdir, log=sys.stderr):
     return rows
 
 
-def main(argv=None, out=sys.stdout):
+def main(argv=None, out=None):
+    out = out or sys.stdout   # looked up at the call: a caller's redirect_stdout holds
     ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.accuracy_response", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI test's reduced study (0.1 m, 0.05 s)")
     ap.add_argument("--outdir", default="accuracy_results", help="folder of response.{md,csv,png}")
