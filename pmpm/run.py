@@ -483,6 +483,10 @@ class Run:
             out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
         if s.ground is not None:
             out.append(s.ground.describe())
+        if s.transfer.name == "apic":
+            out.append("APIC transfer (affine velocity C per particle)")
+        elif s.transfer.name == "xpic":
+            out.append(f"XPIC({s.transfer.order}) transfer ({s.transfer.order - 1} extra grid-particle-grid passes per step)")
         if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
             out.append(s.describe())
         return out
