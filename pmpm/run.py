@@ -543,6 +543,10 @@ class Run:
         if s.pushover is not None:
             out.append(s.pushover.describe())
         out += [e.describe() for e in s.events]
+        if s.transfer.name == "apic":
+            out.append("APIC transfer (affine velocity C per particle)")
+        elif s.transfer.name == "xpic":
+            out.append(f"XPIC({s.transfer.order}) transfer ({s.transfer.order - 1} extra grid-particle-grid passes per step)")
         if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
             out.append(s.describe())
         return out

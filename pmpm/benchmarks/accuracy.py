@@ -598,6 +598,10 @@ def add_arguments(p):
                    help="run only the frame's reference and the CFL-number sweep")
     p.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                    help="time axis of the analysis: wall (default) or CPU time of the stepping")
+    p.add_argument("--response", action="store_true",
+                   help="instead: the whole 0.25 s response of the elastic frame per setting (cell, shape, scheme, "
+                        "CFL, transfer): numerical damping, every peak and the period against the continuum FE "
+                        "model, cost (pmpm/benchmarks/accuracy_response.py; with --quick, --outdir)")
 
 
 def read_csv(path):
@@ -769,6 +773,9 @@ def accuracy(args):
     if MPI.COMM_WORLD.size > 1:
         print("pmpm bench accuracy runs on one rank (start it without mpirun -n > 1)", file=sys.stderr)
         return 2
+    if args.response:
+        from pmpm.benchmarks.accuracy_response import main as response
+        return response((["--quick"] if args.quick else []) + ["--outdir", args.outdir])
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:
         command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()

@@ -151,3 +151,17 @@ def test_apic_loses_less_than_pic_on_the_bar(tmp_path, monkeypatch):
         res = pmpm.run("bar.toml", overrides={"solver.end_time": 4.0, **over}, dataframes=False)
         loss[name] = float(res.energies["numerical_loss"][-1])
     assert 0 < loss["apic"] < 0.5 * loss["pic"], loss
+
+
+def test_an_unnamed_transfer_costs_nothing():
+    """docs/effects.md: FLIP (the default) keeps no affine field and lists no transfer effect;
+    naming APIC adds the field and says so at start."""
+    from pmpm.core.solver import Solver
+    from pmpm.run import Run
+    flip = Solver(_spinning_block("musl", "flip"), MPI.COMM_SELF)
+    assert "C" not in flip.particles.fields and flip.transfer.fields == {}
+    run = Run(_spinning_block("musl", "apic"), MPI.COMM_SELF, write=False)
+    assert run.solver.particles["C"].shape == (run.solver.particles.n, 4)
+    assert any(line.startswith("APIC transfer") for line in run.effects())
+    assert not any("transfer" in line for line in Run(_spinning_block("musl", "flip"), MPI.COMM_SELF,
+                                                      write=False).effects())

@@ -61,6 +61,9 @@ __all__ = ["FrameData", "read_scene", "build_mesh", "FrameFE", "frame_fe", "step
            "Member", "SCENE"]
 
 SCENE = Path(__file__).resolve().parents[2] / "cases" / "portal_frame.toml"
+#: the cell size of the MPM runs the tests compare with (frame_runs.TEST_CELL); the probe sits
+#: at the particle their tracker follows
+TEST_CELL = 0.05
 
 
 @dataclass(frozen=True)
@@ -287,7 +290,8 @@ class FrameFE:
         self.f = self._load_vector(t)
         self.fixed = self._fixed_dofs()
         self.free = np.setdiff1d(np.arange(self.basis.N), self.fixed)
-        px, py = mpm_track_point(data)
+        # the particle the frame tests' runs track (their cell size, frame_runs.TEST_CELL)
+        px, py = mpm_track_point(data, TEST_CELL)
         self.probe = self.basis.probes(np.array([[px], [py]]))  # rows: ux, uy at the point
         self._modes = None
 

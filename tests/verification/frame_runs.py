@@ -17,6 +17,10 @@ from pmpm.scene.config import apply_overrides, parse_scene, read_toml
 
 SCENE = "cases/portal_frame.toml"
 COLUMNS_X = (0.0, 6.096)
+#: the cell size of the frame tests' runs (m): their tolerances are derived there
+#: (test_frame_continuum.py, from 0.05 against 0.025 m), whatever the main job's own; the main
+#: job's resolution is held by test_main_job_amplitude.py
+TEST_CELL = 0.05
 
 
 def base_moments(s, y0=0.1, y1=0.3):
@@ -32,8 +36,8 @@ def base_moments(s, y0=0.1, y1=0.3):
 
 def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE, supports=None, load_scale=1.0):
     """The scene's ``variant``, with mass-proportional ``damping`` (1/s) through its
-    ``loads.damping`` key when non-zero (validated like any scene file), and optionally cells of
-    ``cell_size`` over the same domain (x in [-0.5, 6.6], y in [0, 4.2])."""
+    ``loads.damping`` key when non-zero (validated like any scene file), on cells of
+    ``cell_size`` (default TEST_CELL) over the same domain (x in [-0.5, 6.6], y in [0, 4.2])."""
     data = read_toml(scene)
     data = apply_overrides(data, data["variants"][variant], f"variants.{variant}")
     if damping:
@@ -43,7 +47,8 @@ def frame_scene(variant, damping=0.0, cell_size=None, scene=SCENE, supports=None
             s["type"] = supports or s["type"]
         for f in data["frame"].get("loads", []):
             f["force"] = [load_scale * c for c in f["force"]]
-    if cell_size:
+    cell_size = cell_size or TEST_CELL
+    if cell_size != data["grid"]["cell_size"]:
         extent = [h * n for h, n in zip([data["grid"]["cell_size"]] * 2, data["grid"]["cells"])]
         cells = [int(round(e / cell_size)) for e in extent]
         assert all(abs(n * cell_size - e) < 1e-9 for n, e in zip(cells, extent)), "cells must tile the domain"
