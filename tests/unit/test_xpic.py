@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import pmpm
-from pmpm.core import kernels as K
 from pmpm.core.kernels.reference import basis_matrix
 from pmpm.core.kernels.xpic import grid_particle_grid
 from pmpm.core.shape import SHAPE_TAGS

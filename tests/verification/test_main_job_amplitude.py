@@ -11,7 +11,7 @@ and the second to the same budget spent no faster than the record allows: 0.3% x
 (the loss grows steadily over the record at these settings: docs/accuracy.md). The full record
 is the study's (``pmpm bench accuracy --response``), not a CI run's.
 """
-import math
+import dataclasses
 import os
 import sys
 
@@ -37,7 +37,6 @@ FE_H0, FE_LEVEL, FE_MODES = 0.2, 2, 20   # as test_frame_continuum.py (its cache
 @pytest.fixture(scope="module")
 def run():
     scene = load_scene(CASE, "elastic")[0]
-    import dataclasses
     scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, end_time=T_SHORT),
                                 output=dataclasses.replace(scene.output, checkpoint_interval=None))
     s = Solver(scene, MPI.COMM_SELF)
