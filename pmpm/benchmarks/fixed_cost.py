@@ -4,7 +4,8 @@ A step costs a + b n for n particles: ``a`` is what a step costs whatever its si
 orchestration of the phases, the halo exchanges and allreduces, which are no-ops or cheap on one
 rank, the checks), ``b`` the particles' share. The benchmark runs the benchmark block (cubic,
 MUSL, elastic) at several particle counts and the main job's own scene (the elastic variant of
-cases/portal_frame.toml, about 7,700 particles on 0.05 m cells) in one process, round robin
+cases/portal_frame.toml: 31,438 particles on 0.025 m cells since issue 25, 7,700 on 0.05 m before,
+which docs/performance.md's figures are of) in one process, round robin
 (each case in turn, ``--repeat`` rounds, so a drift of a shared machine hits every case alike),
 each sample the process CPU time of as many steps as make about ``--work`` particle-steps, and
 prints the median ns per particle-step of each case, its ratio to the largest block's (and the ratio of the fastest rounds), and a and
