@@ -854,8 +854,12 @@ def check_results_file(path):
 
 
 def _check_results_path(path):
+    """The checks, then every attribute of every object: all the metadata pmpm's readers touch
+    (run in a forked child first: damaged metadata may crash libhdf5)."""
     with h5py.File(path, "r") as f:
-        _check_results_open(f)
+        _check_results_open(f)  # refuses links first, so the walk below follows none
+        dict(f.attrs.items())
+        f.visititems(lambda name, obj: dict(obj.attrs.items()))
 
 
 def _check_results_open(f):
