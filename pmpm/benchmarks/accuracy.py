@@ -168,18 +168,20 @@ def frame_scene(cell_size, shape="cubic", scheme="musl", ppc=2, t_end=FRAME_T_EN
     """The elastic portal frame regridded with ``cell_size`` over the case's domain (``cfl``:
     the CFL number, default the case's)."""
     from pmpm.scene.config import load_scene
-    scene = load_scene(case, "elastic")[0]
     (x0, y0), (x1, y1) = FRAME_DOMAIN
     cells = (int(round((x1 - x0) / cell_size)), int(round((y1 - y0) / cell_size)))
     for lo, hi, n in zip((x0, y0), (x1, y1), cells):
         if not math.isclose(lo + n * cell_size, hi, abs_tol=1e-9):
             raise ValueError(f"cell size {cell_size} does not divide the frame's domain [{lo}, {hi}]")
-    grid = dataclasses.replace(scene.grid, origin=(x0, y0), cell_size=float(cell_size), cells=cells)
+    # the grid is set before the scene is read: a [frame] case expands its supports, load box
+    # and cuts on the grid it runs on (their extents are counted in cells)
+    scene = load_scene(case, "elastic", overrides={"grid.origin": [x0, y0], "grid.cell_size": float(cell_size),
+                                                   "grid.cells": list(cells)})[0]
     solver = dataclasses.replace(scene.solver, shape_function=shape, scheme=scheme, end_time=float(t_end),
                                  cfl=float(scene.solver.cfl if cfl is None else cfl))
     bodies = tuple(dataclasses.replace(b, particles_per_cell=ppc) for b in scene.bodies)
     output = dataclasses.replace(scene.output, checkpoint_interval=None)
-    return dataclasses.replace(scene, grid=grid, solver=solver, bodies=bodies, output=output)
+    return dataclasses.replace(scene, solver=solver, bodies=bodies, output=output)
 
 
 def _first_peak(t, u):

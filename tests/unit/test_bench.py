@@ -48,7 +48,8 @@ def test_effects_prints_every_effect():
     code, text, summary = _run(["bench", "effects", "--particles", "2000", "--steps", "1",
                                 "--repeat", "1"])
     assert code == 0
-    assert set(summary["effects"]) == {"none", "gravity", "force (step)", "damping", "ground motion",
+    assert set(summary["effects"]) == {"none", "gravity", "force (step)", "damping", "Rayleigh damping (ratio)",
+                                       "ground motion",
                                        "large rotations", "large rotations (Green-Naghdi)",
                                        "deformation gradient kept", "plasticity (smooth_vonmises)",
                                        "hyperelasticity (neo_hookean)"}
