@@ -24,6 +24,17 @@ Where the limits come from:
 * Whole: no particle leaves the grid and lattice neighbours stay within a cell of each other.
 * The corner's largest drop within 5% of the FE curve's 3.28 m (the reading error above plus
   the first-order error of a beam four cells deep at 0.25 m).
+
+Converged over the whole history (issue 20, item 3) is judged against the independent FE model
+on a converged mesh (tests/verification/cantilever_fe_model.py, 9-node elements 7 deep; its own
+convergence is tested in tests/verification/test_cantilever_fe_model.py), not against the
+digitised curve: that curve is a coarse-mesh solution (the FE model matches it best with 2
+elements through the depth, RMS 0.047 m, and moves away from it as its mesh is refined, to
+0.081 m at 6 and 7 deep, where it has converged to 0.0015 m: the converged swing back is about
+0.05 s later than the published one; docs/hard_cases.md). A method that converges must therefore
+close its gap to the converged model, and CI asks the two coarser grids for at least
+half-order convergence: halving the cell cuts the RMS gap by at least 2^-1/2 (first order would
+halve it).
 """
 import functools
 import os
@@ -61,16 +72,24 @@ def test_follows_the_fe_curve_whole_with_energy_conserved(variant):
     assert abs(r["corner_largest_drop"] - FEM_LARGEST_DROP) < DROP_TOLERANCE * FEM_LARGEST_DROP, r
 
 
+def test_the_gap_to_the_converged_fe_model_shrinks_at_least_at_half_order():
+    coarse, fine = (result(v) for v in COARSE)
+    assert coarse["error"] is None and fine["error"] is None
+    ratio = fine["rms_gap_reference"] / coarse["rms_gap_reference"]
+    assert ratio < 2 ** -0.5, (coarse["rms_gap_reference"], fine["rms_gap_reference"])
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not FINE, reason="the 0.0625 m variant takes several minutes: set "
                                      "PMPM_CANTILEVER_FINE=1 or run the study command")
 def test_the_gap_to_the_fe_curve_shrinks_with_refinement():
-    """Issue 20, item 3 (the other helper's; checked here when asked for): the RMS gap shrinks
-    with each refinement and is at most 0.05 m at the finest; the finest corner drop within 1%
-    of 3.28 m."""
+    """Issue 20, item 3: the RMS gap to the converged FE model shrinks with each refinement and
+    is at most 0.05 m at the finest; the finest corner drop within 1% of 3.28 m; energy within
+    1% both ways."""
     runs = [result(f"neo_hookean_h{h}") for h in CELL_SIZES]
     for r in runs:
         assert r["error"] is None and r["separation"] < SEPARATION_CELLS, r
-    gaps = [r["rms_gap_fe"] for r in runs]
+        assert max(r["loss"], r["excess"]) < 0.01, r
+    gaps = [r["rms_gap_reference"] for r in runs]
     assert gaps[0] > gaps[1] > gaps[2] and gaps[2] <= 0.05, gaps
     assert abs(runs[2]["corner_largest_drop"] - FEM_LARGEST_DROP) < 0.01 * FEM_LARGEST_DROP, runs[2]
