@@ -84,7 +84,7 @@ for k in $RANKS; do
         --steps "$STEPS" --repeat "$REPEAT" > "$log" 2>&1
     status=$?
     cat "$log"
-    last="$(tail -n 1 "$log")"
+    last="$(grep -a "^{" "$log" | tail -n 1)"   # the JSON line (a library may print escape codes after it)
     if [ "$status" -eq 0 ] && [ "${last:0:1}" = "{" ]; then
         printf '%s\n' "$last" >> "$RESULTS"
     else
