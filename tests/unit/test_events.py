@@ -89,3 +89,28 @@ def test_force_stress_is_the_stress_itself_until_the_event_acts():
     np.testing.assert_array_equal(f[~rows], s.particles["stress"][~rows][:, :3])
     none = Solver(short_scene(events=[]), MPI.COMM_SELF)
     assert none.events == [] and none.force_stress() is none.particles["stress"]
+
+
+def test_heavy_floor_turns_the_beam_to_catenary_tension():
+    """The study's heavy-floor variant (floor load x3, 90 kN/m), shortened like SHORT but run 50 ms
+    past the removal: once the point above the removed column has dropped by over two beam depths
+    the beam's cuts beside it carry tension (catenary action; in the case's 30 kN/m run the beam stays
+    in compression), and that tension stays below the cable estimate w L^2 / (8 delta) of the double
+    span, a cable carrying the whole load (the beam still carries part in bending)."""
+    from pmpm.benchmarks.studies import column_loss as cl
+    import pmpm
+    factor = 3.0
+    ov = {**SHORT, **cl.catenary_overrides(factor), "solver.end_time": 0.062}
+    ov.pop("output.section")
+    r = pmpm.run(CASE, overrides=ov, dataframes=False, comm=MPI.COMM_SELF)
+    h = r.histories[cl.TRACK]
+    t, uy = np.asarray(h["time"]), np.asarray(h["uy"])
+    w = cl.FLOOR_FORCE * factor / cl.CLEAR_SPAN + cl.BEAM_WEIGHT
+    deep = np.abs(uy) > 2 * 0.40284
+    assert deep.any(), f"the drop reaches only {uy.min():.3f} m"
+    cable = w * cl.CLEAR_SPAN ** 2 / (8 * np.abs(uy[deep]))
+    for name in ("beam_mid_left", "beam_mid_right"):
+        N = np.asarray(r.sections[name]["N"])
+        assert N[t < 0.012].max() < 0, f"{name}: the preloaded beam is not in compression"
+        assert N[deep][-1] > 0, f"{name}: no tension at a drop of {uy[deep][-1]:.2f} m"
+        assert np.all(N[deep] < cable), f"{name}: tension above the cable estimate"
