@@ -1,3 +1,4 @@
+"""Exploration: fit an npz of docs/scripts/frame_3storey_run.py by the step response's modal form and compare with the frame model (docs/portal_frame.md section 11)."""
 import sys, numpy as np
 sys.path.insert(0, "tests/verification")
 from scipy.optimize import least_squares

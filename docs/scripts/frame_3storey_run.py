@@ -1,3 +1,4 @@
+"""Exploration: run the three-storey frame's elastic variant at cell size H (argv: H T_END EVERY PPC); writes frame_3storey_H_PPC.npz (docs/portal_frame.md section 11)."""
 import sys, time, dataclasses, numpy as np
 sys.path.insert(0, "tests/verification")
 from mpi4py import MPI
@@ -23,4 +24,4 @@ while s.t < t_end:
     if s.step_count % every == 0:
         t.append(s.t); u.append(tr.sample()[:, 0].copy())
 print("steps", s.step_count, "wall", time.time() - w, "dt", s.t / s.step_count)
-np.savez(f"/work/scratch/f3_{h}_{ppc}.npz", t=np.array(t), u=np.array(u))
+np.savez(f"frame_3storey_{h}_{ppc}.npz", t=np.array(t), u=np.array(u))
