@@ -13,9 +13,8 @@ sol = least_squares(res, w0)
 B = basis(sol.x); c, *_ = np.linalg.lstsq(B, u, rcond=None)
 print("t_end", t[-1], "T fit", 2*np.pi/sol.x, "frame", T, "ratio", (2*np.pi/sol.x)/T)
 print("rms residual / max", np.sqrt(np.mean(res(sol.x)**2))/np.abs(u).max())
-tt = t
 for k, n in enumerate(("c0_f1","c0_f2","c0_f3")):
-    uf = m.step_response(tt, m.node_dofs[n][0])
+    uf = m.step_response(t, m.node_dofs[n][0])
     j = np.argmax(u[:, k]); jf = np.argmax(uf)
-    print(n, "MPM max %.4f at %.3f, frame %.4f at %.3f, ratio %.4f" % (u[j,k], t[j], uf[jf], tt[jf], u[j,k]/uf[jf]),
+    print(n, "MPM max %.4f at %.3f, frame %.4f at %.3f, ratio %.4f" % (u[j,k], t[j], uf[jf], t[jf], u[j,k]/uf[jf]),
           "rms gap/max %.4f" % (np.sqrt(np.mean((u[:,k]-uf)**2))/uf.max()))

@@ -1,6 +1,5 @@
 """Exploration: run the three-storey frame's elastic variant at cell size H (argv: H T_END EVERY PPC); writes frame_3storey_H_PPC.npz (docs/portal_frame.md section 11)."""
 import sys, time, dataclasses, numpy as np
-sys.path.insert(0, "tests/verification")
 from mpi4py import MPI
 from pmpm.core.solver import Solver
 from pmpm.io.tracking import Tracker
@@ -16,7 +15,7 @@ scene = dataclasses.replace(parse_scene(data, scene_path), variant="elastic")
 s = Solver(scene, MPI.COMM_SELF)
 names = ["c0_f1", "c0_f2", "c0_f3"]
 tr = Tracker([t for t in scene.output.track if t.name in names], s)
-print("particles", s.particles.count if hasattr(s.particles, "count") else len(s.particles["x"]))
+print("particles", len(s.particles["x"]))
 t, u = [], []
 w = time.time()
 while s.t < t_end:
