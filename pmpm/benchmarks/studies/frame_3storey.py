@@ -1,0 +1,240 @@
+"""The three-storey frame (cases/frame_3storey.toml) against the independent frame model (issue 22, item 5).
+
+Each cell size runs the case's ``elastic`` variant (the step lateral load 200 / 400 / 600 kN at the
+left joints of floors 2, 3 and the roof, no damping) in-process, on as many ranks as the study was
+started on, and samples the horizontal displacement of the three left joints. The independent
+model is tests/verification/frame2d_model.py (Timoshenko beam-columns with joint panels; it reads
+the same scene file and shares no code with pmpm) and its undamped step response by modal
+superposition, exact in time. Reported per cell size:
+
+- the first three periods, from a least-squares fit of the three joint histories by the undamped
+  step response's own form, u_k(t) = sum_i c_ki (1 - cos w_i t) with three frequencies shared by
+  the joints (started from the frame model's), over the whole record; the fit's residual is printed
+  so a poor fit shows (it should stay a few per cent of the largest drift);
+- the roof's first peak (the largest drift before 0.7 T1) and its largest drift over the record,
+  each against the frame model's over the same window;
+- the RMS gap of each joint's whole history to the frame model's, relative to the model's largest
+  drift of that joint (floors 2, 3, roof);
+- the energy balance: the largest |external work - kinetic - strain energy| over the record
+  relative to the largest external work (the solver's ``numerical_loss``; losses and gains both
+  count, the elastic undamped scene conserves energy);
+- particles, steps and wall time.
+
+Then a Markdown table and one JSON line (also written to ``--out``). ``--histories FILE.npz`` keeps
+the records, ``--plot PNG`` draws them with the frame model's (joint drifts and storey drifts).
+
+The grid of the case (x in [-0.6, 19.0], y in [0, 12.8]) is tiled by 0.2, 0.1 and 0.05 m cells.
+Particles per cell (``--ppc``, default 3) stay the same at every cell size: at 0.2 m the W14 columns
+(0.42 m deep) are two cells deep, and 2 x 2 particles per cell would leave four rows, too few to
+carry the section's area and inertia (the front end refuses it).
+
+Run::
+
+    python -m pmpm.benchmarks.studies.frame_3storey --cells 0.2 --t-end 1.5 --plot /tmp/f3.png
+    # the finer grids on two ranks (0.05 m: about 240,000 particles at 3 x 3, hours here)
+    mpirun -n 2 python -m pmpm.benchmarks.studies.frame_3storey --cells 0.1 --out /tmp/f3_01.json
+"""
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+__all__ = ["frame_model", "scene_at", "run_cell", "fit_periods", "compare", "main"]
+
+_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+CASE = os.path.join(_ROOT, "cases", "frame_3storey.toml")
+_TESTS = os.path.join(_ROOT, "tests", "verification")
+#: the tracked left joints of floors 2, 3 and the roof (frame node names)
+JOINTS = ("c0_f1", "c0_f2", "c0_f3")
+STOREY_HEIGHT = 3.96
+#: the first peak is the largest drift before this fraction of the frame model's T1 (its first
+#: peak is at 0.46 T1; the next maximum of the roof comes after 1.2 T1)
+FIRST_PEAK_WINDOW = 0.7
+
+
+def frame_model(scene=CASE):
+    """The independent frame model of ``scene`` (tests/verification/frame2d_model.py)."""
+    if not os.path.exists(os.path.join(_TESTS, "frame2d_model.py")):
+        raise RuntimeError("tests/verification/frame2d_model.py not found next to this package")
+    sys.path.insert(0, _TESTS)
+    try:
+        import frame2d_model
+    finally:
+        sys.path.pop(0)
+    return frame2d_model.from_scene(scene, variant="elastic")
+
+
+def scene_at(h, ppc=3, variant="elastic", scene=CASE):
+    """The case's ``variant`` on cells of ``h`` over the case's own domain, ``ppc`` x ``ppc``
+    particles per cell."""
+    from pmpm.scene.config import apply_overrides, parse_scene, read_toml
+    data = read_toml(scene)
+    data = apply_overrides(data, data["variants"][variant], f"variants.{variant}")
+    grid = data["grid"]
+    extent = [grid["cell_size"] * n for n in grid["cells"]]
+    cells = [int(round(e / h)) for e in extent]
+    if any(abs(n * h - e) > 1e-9 for n, e in zip(cells, extent)):
+        raise ValueError(f"cells of {h} m do not tile the case's domain {extent}")
+    data["grid"] = dict(grid, cell_size=float(h), cells=cells)
+    data["particles_per_cell"] = int(ppc)
+    return dataclasses.replace(parse_scene(data, scene), variant=variant)
+
+
+def run_cell(h, ppc=3, t_end=1.5, every=10, comm=None, progress=True):
+    """Run the elastic variant at cell size ``h`` to ``t_end``; sample the joints' ux and the
+    energies every ``every`` steps."""
+    from mpi4py import MPI
+
+    from pmpm.core.solver import Solver
+    from pmpm.io.tracking import Tracker
+    comm = comm or MPI.COMM_WORLD
+    scene = scene_at(h, ppc)
+    s = Solver(scene, comm)
+    tracker = Tracker([t for t in scene.output.track if t.name in JOINTS], s)
+    order = [[t.name for t in scene.output.track if t.name in JOINTS].index(n) for n in JOINTS]
+    particles = comm.allreduce(len(s.particles["x"]))
+    t, u, loss, work = [0.0], [np.zeros(3)], [0.0], [0.0]
+    start = time.perf_counter()
+    shown = 0.0
+    while s.t < t_end:
+        s.step()
+        if s.step_count % every == 0:
+            e = s.energies()
+            t.append(s.t)
+            u.append(tracker.sample()[order, 0].copy())
+            loss.append(e["numerical_loss"])
+            work.append(e["external_work"])
+            if progress and comm.rank == 0 and s.t >= shown:
+                el = time.perf_counter() - start
+                print(f"\r  {h} m: t = {s.t:.3f} / {t_end} s, {s.step_count} steps, {el:.0f} s",
+                      end="", file=sys.stderr, flush=True)
+                shown += t_end / 50
+    wall = time.perf_counter() - start
+    if progress and comm.rank == 0:
+        print(file=sys.stderr)
+    return {"h": h, "ppc": ppc, "t": np.array(t), "u": np.array(u), "loss": np.array(loss),
+            "external_work": np.array(work), "particles": particles, "steps": s.step_count,
+            "wall": wall, "ranks": comm.size}
+
+
+def fit_periods(t, u, periods):
+    """Periods of a least-squares fit of the joints' records ``u`` (n x joints) by
+    sum_i c_ki (1 - cos w_i t), frequencies shared, started from ``periods``; and the fit's RMS
+    residual relative to the largest |u|."""
+    from scipy.optimize import least_squares
+
+    def basis(w):
+        return 1.0 - np.cos(np.outer(t, w))
+
+    def residual(w):
+        b = basis(w)
+        c, *_ = np.linalg.lstsq(b, u, rcond=None)
+        return (b @ c - u).ravel()
+
+    sol = least_squares(residual, 2 * np.pi / np.asarray(periods, float))
+    rms = np.sqrt(np.mean(residual(sol.x) ** 2)) / np.abs(u).max()
+    return 2 * np.pi / sol.x, rms
+
+
+def compare(run, model):
+    """The run's figures against the frame model's (see the module's docstring)."""
+    t, u = run["t"], run["u"]
+    periods = model.modes(3)[0]
+    fitted, residual = fit_periods(t, u, periods)
+    ref = np.array([model.step_response(t, model.node_dofs[n][0]) for n in JOINTS]).T
+    first = t <= FIRST_PEAK_WINDOW * periods[0]
+    out = {"h": run["h"], "ppc": run["ppc"], "particles": run["particles"], "steps": run["steps"],
+           "wall_s": round(run["wall"], 1), "ranks": run["ranks"], "t_end": float(t[-1]),
+           "periods": [float(p) for p in fitted], "frame_periods": [float(p) for p in periods],
+           "period_ratios": [float(a / b) for a, b in zip(fitted, periods)], "fit_residual": float(residual),
+           "roof_first_peak": float(u[first, 2].max()), "frame_roof_first_peak": float(ref[first, 2].max()),
+           "roof_peak": float(u[:, 2].max()), "frame_roof_peak": float(ref[:, 2].max()),
+           "rms_gap": [float(np.sqrt(np.mean((u[:, k] - ref[:, k]) ** 2)) / np.abs(ref[:, k]).max())
+                       for k in range(3)],
+           "energy_gap": float(np.abs(run["loss"]).max() / max(np.abs(run["external_work"]).max(), 1e-300))}
+    out["roof_first_peak_ratio"] = out["roof_first_peak"] / out["frame_roof_first_peak"]
+    out["roof_peak_ratio"] = out["roof_peak"] / out["frame_roof_peak"]
+    return out
+
+
+def markdown_table(rows):
+    lines = ["| cells (m) | ppc | particles | steps | wall (s) | ranks | T1 / frame | T2 / frame | T3 / frame "
+             "| fit residual | roof first peak / frame | roof peak / frame | RMS gap floors 2, 3, roof | energy gap |",
+             "|" + "---:|" * 14]
+    for r in rows:
+        lines.append("| {h} | {ppc} x {ppc} | {particles:,} | {steps:,} | {wall_s:.0f} | {ranks} | ".format(**r)
+                     + " | ".join(f"{x:.3f}" for x in r["period_ratios"])
+                     + f" | {100 * r['fit_residual']:.1f}% | {r['roof_first_peak_ratio']:.3f} "
+                     f"| {r['roof_peak_ratio']:.3f} | "
+                     + " / ".join(f"{100 * g:.1f}%" for g in r["rms_gap"])
+                     + f" | {100 * r['energy_gap']:.2f}% |")
+    return "\n".join(lines)
+
+
+def plot(runs, model, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5), sharex=True)
+    t_ref = np.linspace(0.0, max(r["t"][-1] for r in runs), 2000)
+    ref = np.array([model.step_response(t_ref, model.node_dofs[n][0]) for n in JOINTS]).T
+    labels = ("floor 2", "floor 3", "roof")
+    for k in range(3):
+        a.plot(t_ref, 1e3 * ref[:, k], "k-", lw=1.0, label="frame model" if k == 0 else None)
+        storey = ref[:, k] - (ref[:, k - 1] if k else 0.0)
+        b.plot(t_ref, 100 * storey / STOREY_HEIGHT, "k-", lw=1.0, label="frame model" if k == 0 else None)
+    for r in runs:
+        for k in range(3):
+            a.plot(r["t"], 1e3 * r["u"][:, k], "--", lw=1.0, label=f"MPM {r['h']} m, {labels[k]}")
+            storey = r["u"][:, k] - (r["u"][:, k - 1] if k else 0.0)
+            b.plot(r["t"], 100 * storey / STOREY_HEIGHT, "--", lw=1.0, label=f"MPM {r['h']} m, storey {k + 1}")
+    a.set(xlabel="t (s)", ylabel="joint drift ux (mm)", title="Left joints under the step lateral load")
+    b.set(xlabel="t (s)", ylabel="storey drift ratio (%)", title="Storey drifts")
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None):
+    from mpi4py import MPI
+    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.frame_3storey",
+                                 description="The three-storey frame against the independent frame model.")
+    ap.add_argument("--cells", type=float, nargs="+", default=[0.2], help="cell sizes (m)")
+    ap.add_argument("--ppc", type=int, default=3, help="particles per cell along each axis (all cell sizes)")
+    ap.add_argument("--t-end", type=float, default=1.5, help="end of each run (s); T1 is about 0.94 s")
+    ap.add_argument("--every", type=int, default=10, help="sample every this many steps")
+    ap.add_argument("--out", help="write the JSON summary here")
+    ap.add_argument("--histories", help="write the records here (.npz)")
+    ap.add_argument("--plot", help="draw the joint and storey drifts here (.png)")
+    args = ap.parse_args(argv)
+    comm = MPI.COMM_WORLD
+    model = frame_model()
+    runs, rows = [], []
+    for h in args.cells:
+        run = run_cell(h, args.ppc, args.t_end, args.every, comm)
+        runs.append(run)
+        rows.append(compare(run, model))
+    if comm.rank:
+        return 0
+    print(markdown_table(rows))
+    if args.histories:
+        np.savez(args.histories, **{f"{k}_{r['h']}": r[k] for r in runs for k in ("t", "u", "loss", "external_work")})
+    if args.plot:
+        plot(runs, model, args.plot)
+    summary = {"study": "frame_3storey", "rows": rows}
+    line = json.dumps(summary)
+    if args.out:
+        with open(args.out, "w") as fh:
+            fh.write(line + "\n")
+    print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
