@@ -5,7 +5,9 @@ runs its elastic variant for ``--steps`` steps as that command runs it (``pmpm.r
 its output: frames, histories, tracked points, section cuts, reactions, energies and the final
 checkpoint, into a temporary folder), on 1 and on 2 ranks, each launched by ``mpirun``
 itself, ``--repeat`` times in turn (1, 2, 1, 2, ...), and prints the median wall time of the
-stepping loop, the CPU time of all ranks and the speed-up of two ranks over one.
+stepping loop, the CPU time of all ranks and the speed-up of two ranks over one. ``--case`` and
+``--variant`` time another scene the same way (the three-storey frame on 1, 2 and 4 ranks, say:
+``pmpm bench ranks --case cases/frame_3storey.toml --ranks 1 2 4 --load none``).
 
 With ``--load busy`` (and ``both``, the default) the same runs are repeated under a background
 load the benchmark starts itself: one ``nice -n 19`` busy loop pinned to each core, each in a
@@ -57,6 +59,10 @@ def add_arguments(p):
                    help="run the solver alone (no files, no histories) instead of the whole run")
     p.add_argument("--phases", action="store_true",
                    help="time the phases of the step on every rank instead (solver only)")
+    p.add_argument("--case", default=FRAME_CASE,
+                   help="scene file timed (default the main job's cases/portal_frame.toml); a scene "
+                        "whose output paths are relative runs in a temporary folder")
+    p.add_argument("--variant", default=VARIANT, help=f"its variant (default {VARIANT})")
     p.add_argument("--count-calls", action="store_true",
                    help="also count the MPI calls per step (a PMPI shim built with mpicc)")
 
@@ -97,8 +103,9 @@ def _mpirun(k, bind, args, env=None):
         cmd = ["mpirun", "-n", str(k), "--bind-to", bind]
         if k > (os.cpu_count() or 1):
             cmd.append("--oversubscribe")
-        mode, steps = args
-        cmd += [sys.executable, "-m", "pmpm.benchmarks.ranks", "--child", mode, out, "--steps", steps]
+        mode, steps, case, variant = args
+        cmd += [sys.executable, "-m", "pmpm.benchmarks.ranks", "--child", mode, out, "--steps", steps,
+                "--case", case, "--variant", variant]
         # an explicit environment: with env=None the child inherits the C-level one, where an
         # MPI already initialised in this process (a singleton, as under pytest) has put its own
         # PMIx variables, and the new mpirun then fails without a word
@@ -109,8 +116,8 @@ def _mpirun(k, bind, args, env=None):
             return json.load(f)
 
 
-def _child(mode, steps, out):
-    """Under mpirun: run the frame (``mode`` "run", "solver" or "phases") and write its figures."""
+def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
+    """Under mpirun: run the scene (``mode`` "run", "solver" or "phases") and write its figures."""
     from mpi4py import MPI
     from pmpm.core.solver import Solver
     from pmpm.scene.config import load_scene
@@ -119,16 +126,22 @@ def _child(mode, steps, out):
     cwd = os.getcwd()
     os.chdir(tmp)  # the scene's output folder is relative to the working directory
     try:
-        case = os.path.join(tmp, os.path.basename(FRAME_CASE))
+        case = os.path.join(tmp, os.path.basename(scene_file))
         if comm.rank == 0:
-            shutil.copy(FRAME_CASE, case)
+            # the copy sits beside the scene's own data folders (a record file, say) as links
+            shutil.copy(scene_file, case)
+            here = os.path.dirname(os.path.abspath(scene_file))
+            for entry in os.listdir(here):
+                if os.path.isdir(os.path.join(here, entry)) and not entry.endswith("_results"):
+                    os.symlink(os.path.join(here, entry), os.path.join(tmp, entry))
         comm.Barrier()
-        scene = load_scene(case, VARIANT, overrides={"solver.max_steps": steps + WARM_STEPS})[0]
+        scene = load_scene(case, variant, overrides={"solver.max_steps": steps + WARM_STEPS})[0]
         warm = Solver(scene, comm)  # the kernels read from numba's cache, outside the timing
         for _ in range(WARM_STEPS):
             warm.step()
+        particles = comm.allreduce(warm.particles.n)
         del warm
-        record = {"ranks": comm.size, "steps": steps, "mode": mode}
+        record = {"ranks": comm.size, "steps": steps, "mode": mode, "particles_total": particles}
         if mode == "phases":
             from pmpm.benchmarks.phase_profile import phase_times
             s = Solver(scene, comm)
@@ -225,20 +238,24 @@ def _print_phases(load, k, records, steps):
 def ranks(args):
     """``pmpm bench ranks``: returns the exit code."""
     if getattr(args, "child", None):
-        return _child(args.child[0], args.steps, args.child[1])
+        return _child(args.child[0], args.steps, args.child[1], os.path.abspath(args.case), args.variant)
     if shutil.which("mpirun") is None:
         print("pmpm: error: bench ranks: mpirun not found (Open MPI's launcher)", file=sys.stderr)
         return 2
     mode = "phases" if args.phases else ("solver" if args.no_output else "run")
-    child_args = [mode, str(args.steps)]
+    case = os.path.abspath(args.case)
+    if not os.path.isfile(case):
+        print(f"pmpm: error: bench ranks: --case {args.case}: no such file", file=sys.stderr)
+        return 2
+    child_args = [mode, str(args.steps), case, args.variant]
     loads = {"both": ["none", "busy"], "none": ["none"], "busy": ["busy"]}[args.load]
     from pmpm.benchmarks.cpuinfo import cpu_model
-    print(f"pmpm bench ranks: {os.path.relpath(FRAME_CASE)} [{VARIANT}], {args.steps} steps, "
+    print(f"pmpm bench ranks: {os.path.relpath(case)} [{args.variant}], {args.steps} steps, "
           f"{'solver only' if args.no_output else 'phases' if args.phases else 'with its output'}, "
           f"ranks {args.ranks}, {args.repeat} runs each in turn, mpirun --bind-to {args.bind}; "
           f"{os.cpu_count()} CPUs ({cpu_model()}), load average {os.getloadavg()[0]:.2f} at the start",
           flush=True)
-    results = {"scene": f"{os.path.basename(FRAME_CASE)} [{VARIANT}]", "steps": args.steps,
+    results = {"scene": f"{os.path.basename(case)} [{args.variant}]", "steps": args.steps,
                "mode": mode, "repeat": args.repeat, "bind": args.bind, "cpu_model": cpu_model(),
                "cpus": os.cpu_count(), "mpi_env": {k: v for k, v in os.environ.items() if k.startswith("OMPI_MCA_mpi")},
                "loads": {}}
@@ -251,6 +268,7 @@ def ranks(args):
                     for k in args.ranks:
                         records[k].append(_mpirun(k, args.bind, child_args))
             results["loads"][load] = {str(k): _summary(rs) for k, rs in records.items()}
+            results["particles"] = records[args.ranks[0]][0].get("particles_total")
             if args.phases:
                 for k, rs in records.items():
                     results["loads"][load][str(k)]["phases_us_per_step"] = _print_phases(load, k, rs, args.steps)
@@ -261,7 +279,7 @@ def ranks(args):
                     print("count-calls: no mpicc or no jobs/mpi_calls source: not counted")
                 else:
                     results["mpi_calls_per_step"] = {
-                        str(k): _count_calls(k, args.bind, ["run" if mode == "phases" else mode, ""],
+                        str(k): _count_calls(k, args.bind, ["run" if mode == "phases" else mode, "", case, args.variant],
                                              args.steps, tmp, lib) for k in args.ranks if k > 1}
     finally:
         signal.signal(signal.SIGTERM, old)
