@@ -137,7 +137,7 @@ def run_cell(h, ppc=3, t_end=1.5, every=10, comm=None, progress=True, joint_forc
     shown = 0.0
     while s.t < t_end:
         s.step()
-        if s.step_count % every == 0:
+        if s.step_count % every == 0 or s.t >= t_end:   # and the end itself
             e = s.energies()
             t.append(s.t)
             u.append(tracker.sample()[order, 0].copy())
