@@ -8,8 +8,10 @@ it). Checked here with pmpm's own reader (pmpm.physics.groundmotion.read_record)
 * the header's NPTS and DT and its stated PGA against what the reader returns (the values are
   written with 8 significant digits, the package's 6 carried exactly);
 * FEMA P695 Table A-4 (far-field record set, record 1): PGAmax 0.52 g and PGVmax 63 cm/s, each
-  the larger of the record's two components, rounded: this component may not exceed them
-  (MUL279, the other one, holds the maxima: 0.516 g, 62.7 cm/s from the same package);
+  the larger of the record's two components, rounded (the figures as the package's ``records``
+  table carries them, columns PGAmax and PGVmax; not compared with the report's PDF here): this
+  component may not exceed them (MUL279, the other one, holds the maxima: 0.516 g and 62.7 cm/s
+  from the same package's data);
 * a PEER-processed record is baseline-corrected: its velocity returns to rest at the end.
   Both the PGV bound and this fail if the reader took the wrong DT or units.
 """
