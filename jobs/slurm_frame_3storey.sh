@@ -8,10 +8,12 @@
 # COST (an ESTIMATE, not a measured full run): 0.05 m cells, 2 x 2 particles per cell: 85,512
 # particles; the stable step is 8.5e-6 s, so about 235,000 steps for each 2 s step-load variant
 # (elastic, elastoplastic; ~176,000 per 1.5 s), 470,000 for ground_motion (4 s) and 1.76 million
-# for northridge (15 s of the real record): 2.7 million steps in all. At the ~420-450 ns per
-# particle-step measured here on one core that is ~2.3 core-hours per step-load variant, ~4.7 for
-# ground_motion and ~18 for northridge, ~28 core-hours in all; the 8 ranks below make it ~3.5 h if
-# the ranks scaled perfectly (they do not: TIME leaves room for ~60% efficiency). One variant:
+# for northridge (15 s of the real record): 2.7 million steps in all. At the ~420-520 ns per
+# particle-step measured here on one core (the lower figure the bare step, the higher pmpm's own
+# "left ~78,000 s" after 300 steps of northridge, with its histories) that is ~2.3-2.7 core-hours
+# per step-load variant, ~5 for ground_motion and ~18-22 for northridge, ~28-34 core-hours in
+# all; the 8 ranks below make it ~4 h if the ranks scaled perfectly (they do not, and their
+# scaling on this case is not measured: TIME leaves room for ~35% efficiency). One variant:
 # VARIANT=elastic TIME=04:00:00 bash jobs/slurm_frame_3storey.sh. The case sets no
 # checkpoint_interval: a requeued run starts over (see slurm_run.sh).
 #
