@@ -9,7 +9,8 @@ with every process still carrying this cluster's SLURM_CONF in its environment.
 Tests: the weak-scaling sweep (jobs/slurm_scaling_weak.sh, 1 and 2 ranks, tiny) gathered by
 jobs/gather_scaling.py; jobs/slurm_run.sh running a tiny scene, continuing it from its
 checkpoint after the end time grows, skipping it when complete, and passing pmpm's exit code;
-a running job requeued with `scontrol requeue` continuing from its checkpoint.
+a running job requeued with `scontrol requeue` continuing from its checkpoint;
+jobs/slurm_frame_3storey.sh reaching slurm_run.sh from sbatch's copy with its case.
 Runtime: 1-2 minutes here (2 vCPUs), after a first install of about 15 s.
 Run alone:  python -m pytest -q tests/slurm   (in the checkout's .venv, as root)
 """
@@ -514,6 +515,17 @@ def test_run_script_restarts_skips_and_passes_exit_code(cluster):
     job = cluster.sbatch(JOBS / "slurm_run.sh", ["-n", "1", "--time=10"],
                          _job_env(CASE=work / "missing.toml", OUTDIR=work / "runs"), work)
     _assert_job(cluster, job, cluster.wait(job, work), expect_state="FAILED", expect_exit="2:0")
+
+
+def test_frame_3storey_wrapper_runs_its_case_through_slurm_run(cluster):
+    """The wrapper, submitted with sbatch (which runs a copy of it), hands the three-storey case
+    to slurm_run.sh; an unknown variant keeps the job to pmpm's bad-input exit (2), not a run."""
+    work = cluster.root / "jobs" / "frame3"
+    job = cluster.sbatch(JOBS / "slurm_frame_3storey.sh", ["-n", "1", "--time=10"],
+                         _job_env(VARIANT="nope", OUTDIR=work / "runs"), work)
+    out = _assert_job(cluster, job, cluster.wait(job, work), expect_state="FAILED", expect_exit="2:0")
+    assert f"case {REPO / 'cases' / 'frame_3storey.toml'} variant nope" in out, out
+    assert "no variant 'nope'" in out, out
 
 
 def _wait_for_text(cluster, job, workdir, pattern, timeout, after=""):
