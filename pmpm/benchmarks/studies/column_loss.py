@@ -197,7 +197,8 @@ def plot_catenary(d, factor, h, path):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cells", type=float, nargs="+", default=[0.1, 0.05])
+    ap.add_argument("--cells", type=float, nargs="*", default=[0.1, 0.05],
+                    help="cell sizes run (m); none with --cells alone (e.g. for --catenary only)")
     ap.add_argument("--out")
     ap.add_argument("--histories")
     ap.add_argument("--plot")
