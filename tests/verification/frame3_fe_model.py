@@ -238,5 +238,32 @@ def study(levels=(0, 1, 2), h0=0.2, n_modes=40, path=SCENE3, t_end=1.5, dt=5e-4)
     return {"levels": list(levels), "periods": rows, "richardson": rich, "frame": Tf}
 
 
+def stiff_panel_periods(data, h0=0.2, level=1, factor=100.0, n=3):
+    """Periods with the joint-panel strips' stiffness multiplied by ``factor`` (a diagnostic:
+    near-rigid panels, to compare with frame2d_model's ``panels=False``, its rigid joints)."""
+    fe = Frame3FE(data, h0, level)
+    c = fe.mesh.p[:, fe.mesh.t].mean(axis=1)
+    stiff = np.zeros(c.shape[1], bool)
+    for m in data.members:
+        if "_panel_" in m.name:
+            x0, x1, y0, y1 = m.box
+            stiff |= (c[0] > x0) & (c[0] < x1) & (c[1] > y0) & (c[1] < y1)
+    nqp = fe.basis.X.shape[1]
+    t = np.repeat((fe.thickness * np.where(stiff, factor, 1.0))[:, None], nqp, axis=1)
+    mu, lam = data.E / (2 * (1 + data.nu)), data.E * data.nu / (1 - data.nu ** 2)
+
+    @BilinearForm
+    def stiffness(u, v, w):
+        eu, ev = sym_grad(u), sym_grad(v)
+        return w["t"] * (2 * mu * ddot(eu, ev) + lam * trace(eu) * trace(ev))
+
+    fe.K = asm(stiffness, fe.basis, t=t)   # the mass matrix keeps the true thickness
+    fe._modes = None
+    return fe.periods(n)
+
+
 if __name__ == "__main__":
     study()
+    import frame2d_model as f2d
+    print("panels x100 stiffer, level 1:", np.round(stiff_panel_periods(read_scene3()), 4),
+          "| frame2d_model panels=False:", np.round(f2d.from_scene(str(SCENE3), panels=False).modes(3)[0], 4))
