@@ -1,71 +1,91 @@
-"""The three-storey frame through the front end against an independent frame model (issue 22, item 5).
+"""The three-storey frame through the front end against an independent model (issue 22, item 5).
 
 cases/frame_3storey.toml (the SAC LA 3-storey moment frame, two of its four bays, written as
 nodes, members and named W sections) in its ``elastic`` variant under the step lateral load, at
-the coarse grid CI can afford (0.2 m cells, 3 x 3 particles per cell: the W14 columns are two
-cells deep), to 0.7 s: past the roof's first peak (0.44 s) and 0.74 of the fundamental period
-(T1 = 0.944 s in the frame model). The independent model is frame2d_model.py (Timoshenko
-beam-columns with joint panels, exact modal step response; it reads the scene file and shares no
-code with pmpm). The study command ``python -m pmpm.benchmarks.studies.frame_3storey`` runs the
-same comparison on finer grids and over 1.5 s, and the second period from a run loaded in a
-pattern that excites mode 2 alone (docs/portal_frame.md section 11): T2 needs finer cells than CI
-affords (12.7% long at 0.2 m, 4.0% at 0.1 m, converging on the frame model's), so it is not
-checked here.
+0.1 m cells with the case's 2 x 2 particles per cell, to 0.6 s: past the roof's first peak
+(0.43 to 0.49 s) and 0.65 of the fundamental period. About 5 minutes on this host.
 
-Checked, the bounds being the issue's:
-(a) the first period, from the fit of the three left joints' records by the undamped step
-    response's modal form (three frequencies shared by the joints; the case's load pattern is
-    mostly mode 1, so T1 is what the window determines), within 3% of the frame model's; the same
-    fit of the frame model's own record over the same window recovers its T1 within 0.5%, so the
-    estimator is sound on this window, and its residual on the MPM record stays below 3% of the
-    largest drift;
-(b) the roof's first peak (its step-load peak drift) within 5%;
-(c) the whole history of each joint within 5% RMS of the frame model's (relative to its largest
-    drift: the issue's peak bound applied to every sample, so a drift between peaks counts);
+The reference is the plane-stress continuum of the same strips (frame3_fe_model.py: scikit-fem,
+9-node quadrilaterals, the expanded scene's bodies with the nodal masses as the joint panels'
+density; it shares no solver code with pmpm), on its level-1 mesh (0.1 m elements: its T1 is
+0.2% from the Richardson limit of levels 0-2, docs/portal_frame.md section 11), read at the
+particles the MPM tracks. The Timoshenko frame model (frame2d_model.py) is printed beside it but
+not asserted: its one-spring joint panel makes it 2.7% longer in T1 and 4.6% shorter in T2 than
+the continuum, and its roof peak 6.5% larger (with rigid panels in both models they agree within
+0.2%), a modelling gap of the frame model, not an MPM error. At 0.2 m cells the MPM is 3.3% long
+in T1 and 6% high in the peak against the continuum (coarse strips are too flexible), and would
+match the frame model only by those two errors cancelling, so CI runs 0.1 m.
+
+Checked, the bounds being the issue's (3% for periods, 5% for the peak drift):
+(a) T1, from a least-squares fit of the three left joints' records by the undamped step
+    response's modal form (three frequencies shared by the joints; the case's load pattern puts
+    98% of the roof's static drift in mode 1, so T1 is what the window determines), within 3% of
+    the continuum's; the same fit of the continuum's own record over the same window recovers its
+    eigenperiod within 0.5%, so the estimator is sound on this window, and its residual on the
+    MPM record stays below 3% of the largest drift;
+(b) the roof's first peak (its largest drift in the window) within 5%;
+(c) the whole history of each joint within 5% RMS of the continuum's (relative to its largest
+    drift: the peak bound applied to every sample, so a drift between peaks counts);
 (d) energy: the undamped elastic scene conserves it, so |external work - kinetic - strain| stays
     below 1% of the external work over the whole run, losses and gains both counted.
+T2 is the study's (``python -m pmpm.benchmarks.studies.frame_3storey``, a run loaded in a
+mode-2 pattern): 0.6% from the continuum's at 0.1 m, 0.1% at 0.05 m.
 """
+import os
+import sys
+
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from pmpm.benchmarks.studies import frame_3storey as study
 
-CELL, PPC, T_END = 0.2, 3, 0.7
+sys.path.insert(0, os.path.dirname(__file__))
+import frame3_fe_model as f3  # noqa: E402
+
+CELL, PPC, T_END = 0.1, 2, 0.6
 
 
 @pytest.fixture(scope="module")
 def result():
-    model = study.frame_model()
     run = study.run_cell(CELL, PPC, T_END, every=10, comm=MPI.COMM_SELF, progress=False)
-    return study.compare(run, model), run
+    fe = f3.Frame3FE(f3.read_scene3(), 0.2, 1, track_cell=CELL)
+    periods = fe.periods(3)
+    ref = f3.responses(fe, run["t"])[0].T               # (samples, joints)
+    frame = study.compare(run, study.frame_model())
+    return run, periods, ref, frame
 
 
-def test_first_period_matches_the_frame_model(result):
-    cmp, _ = result
-    print("periods", cmp["periods"], "frame", cmp["frame_periods"], "fit residual", cmp["fit_residual"],
-          "estimator on the frame model's record", cmp["frame_fit_ratios"])
-    assert abs(cmp["frame_fit_ratios"][0] - 1.0) < 0.005
-    assert cmp["fit_residual"] < 0.03
-    assert abs(cmp["period_ratios"][0] - 1.0) < 0.03, cmp["period_ratios"]
+def test_first_period_matches_the_continuum(result):
+    run, periods, ref, frame = result
+    fitted, residual = study.fit_periods(run["t"], run["u"], periods)
+    own, _ = study.fit_periods(run["t"], ref, periods)
+    print("T1 MPM", fitted[0], "continuum", periods[0], "estimator on the continuum's record", own[0],
+          "fit residual", residual, "| frame model T1", frame["frame_periods"][0])
+    assert abs(own[0] / periods[0] - 1.0) < 0.005
+    assert residual < 0.03
+    assert abs(fitted[0] / periods[0] - 1.0) < 0.03
 
 
-def test_roof_peak_drift_matches_the_frame_model(result):
-    cmp, _ = result
-    print("roof first peak", cmp["roof_first_peak"], "frame", cmp["frame_roof_first_peak"])
-    assert abs(cmp["roof_first_peak_ratio"] - 1.0) < 0.05
+def test_roof_peak_drift_matches_the_continuum(result):
+    run, _, ref, frame = result
+    mpm, fe = run["u"][:, 2].max(), ref[:, 2].max()
+    print("roof first peak MPM", mpm, "continuum", fe, "| frame model", frame["frame_roof_first_peak"])
+    assert abs(mpm / fe - 1.0) < 0.05
 
 
 def test_whole_history_of_every_floor(result):
-    cmp, run = result
-    print("rms gaps", cmp["rms_gap"])
+    run, _, ref, _ = result
     assert run["t"][-1] >= T_END
-    assert all(g < 0.05 for g in cmp["rms_gap"]), cmp["rms_gap"]
+    gaps = [np.sqrt(np.mean((run["u"][:, k] - ref[:, k]) ** 2)) / np.abs(ref[:, k]).max() for k in range(3)]
+    print("rms gaps", gaps)
+    assert all(g < 0.05 for g in gaps), gaps
 
 
 def test_energy_is_conserved(result):
-    cmp, run = result
-    print("energy gap", cmp["energy_gap"], "external work at the end", run["external_work"][-1])
+    run = result[0]
+    gap = study.energy_gap(run)
+    print("energy gap", gap, "external work at the end", run["external_work"][-1])
     assert run["external_work"][-1] > 0
-    assert cmp["energy_gap"] < 0.01
     assert np.all(np.isfinite(run["loss"]))
+    assert gap < 0.01

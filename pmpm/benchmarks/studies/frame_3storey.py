@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 
-__all__ = ["frame_model", "mode_pattern", "with_joint_forces", "scene_at", "run_cell", "fit_periods", "compare",
+__all__ = ["frame_model", "continuum_reference", "mode_pattern", "with_joint_forces", "scene_at", "run_cell", "fit_periods", "compare",
            "compare_mode", "main"]
 
 _ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
@@ -72,6 +72,31 @@ def frame_model(scene=CASE):
     finally:
         sys.path.pop(0)
     return frame2d_model.from_scene(scene, variant="elastic")
+
+
+def continuum_reference(levels=(0, 1, 2), h0=0.2, scene=CASE):
+    """The plane-stress continuum of the same strips (tests/verification/frame3_fe_model.py,
+    scikit-fem): its first three periods extrapolated from ``levels`` (Richardson), and the
+    roof's first peak under the case's step loads on the finest mesh (about a minute)."""
+    sys.path.insert(0, _TESTS)
+    try:
+        import frame3_fe_model as f3
+        import frame_fe_model as fem
+    finally:
+        sys.path.pop(0)
+    data = f3.read_scene3(scene)
+    periods = []
+    for level in levels:
+        fe = f3.Frame3FE(data, h0, level)
+        periods.append(fe.periods(3))
+    periods = np.array(periods)
+    rich = [fem.richardson(periods[:, k]) for k in range(3)]
+    t = np.arange(0.0, 1.5, 5e-4)
+    u = f3.responses(fe, t)[0]
+    first = t <= FIRST_PEAK_WINDOW * rich[0][0]
+    return {"periods": [float(v) for v, _, _ in rich], "order": [float(p) for _, p, _ in rich],
+            "error": [float(e) for _, _, e in rich], "roof_first_peak": float(u[-1][first].max()),
+            "levels": list(levels), "h0": h0}
 
 
 def mode_pattern(model, mode, peak=6e5):
@@ -226,8 +251,8 @@ def markdown_table(rows):
     """One row per cell size: the case-pattern run's figures and T2 from the mode-2 run."""
     lines = ["| cells (m) | ppc | particles | steps to t_end | wall (s), case + mode-2 runs | ranks | T1 / frame "
              "| T2 / frame (mode-2 run) | roof first peak / frame | roof peak / frame "
-             "| RMS gap floors 2, 3, roof | energy gap |",
-             "|" + "---:|" * 12]
+             "| RMS gap floors 2, 3, roof | energy gap | T1, T2, first peak / continuum |",
+             "|" + "---:|" * 13]
     for r in rows:
         m2 = r.get("mode2")
         wall = f"{r['wall_s']:.0f}" + (f" + {m2['wall_s']:.0f}" if m2 else "")
@@ -235,7 +260,9 @@ def markdown_table(rows):
                      f"| {r['period_ratios'][0]:.3f} | " + (f"{m2['period_ratio']:.3f}" if m2 else "not run")
                      + f" | {r['roof_first_peak_ratio']:.3f} | {r['roof_peak_ratio']:.3f} | "
                      + " / ".join(f"{100 * g:.1f}%" for g in r["rms_gap"])
-                     + f" | {100 * max(r['energy_gap'], m2['energy_gap'] if m2 else 0):.2f}% |")
+                     + f" | {100 * max(r['energy_gap'], m2['energy_gap'] if m2 else 0):.2f}% | "
+                     + (" / ".join(f"{x:.3f}" if x == x else "-" for x in r["continuum_ratios"])
+                        if "continuum_ratios" in r else "not run") + " |")
     return "\n".join(lines)
 
 
@@ -275,6 +302,8 @@ def main(argv=None):
     ap.add_argument("--t-mode2", type=float, default=0.6,
                     help="end of the run loaded in the mode-2 pattern, for T2 (s; 0: not run)")
     ap.add_argument("--every", type=int, default=10, help="sample every this many steps")
+    ap.add_argument("--no-continuum", action="store_true",
+                    help="skip the plane-stress continuum of the same strips (scikit-fem, about a minute)")
     ap.add_argument("--out", help="write the JSON summary here")
     ap.add_argument("--histories", help="write the records here (.npz)")
     ap.add_argument("--plot", help="draw the joint and storey drifts here (.png)")
@@ -291,12 +320,22 @@ def main(argv=None):
             rows[-1]["mode2"] = compare_mode(mode2, model, 1)
     if comm.rank:
         return 0
+    continuum = None if args.no_continuum else continuum_reference()
+    if continuum:
+        for r in rows:
+            m2 = r.get("mode2")
+            r["continuum_ratios"] = [r["periods"][0] / continuum["periods"][0],
+                                     m2["period"] / continuum["periods"][1] if m2 else float("nan"),
+                                     r["roof_first_peak"] / continuum["roof_first_peak"]]
+        print("continuum of the same strips (frame3_fe_model, Richardson over levels 0-2): T = "
+              + ", ".join(f"{v:.4f}" for v in continuum["periods"])
+              + f" s, roof first peak {continuum['roof_first_peak']:.4f} m")
     print(markdown_table(rows))
     if args.histories:
         np.savez(args.histories, **{f"{k}_{r['h']}": r[k] for r in runs for k in ("t", "u", "loss", "external_work")})
     if args.plot:
         plot(runs, model, args.plot)
-    summary = {"study": "frame_3storey", "rows": rows}
+    summary = {"study": "frame_3storey", "rows": rows, "continuum": continuum}
     line = json.dumps(summary)
     if args.out:
         with open(args.out, "w") as fh:
