@@ -100,9 +100,11 @@ def _mpirun(k, bind, args, env=None):
     the JSON record the child's rank 0 wrote."""
     with tempfile.TemporaryDirectory(prefix="pmpm_ranks_") as tmp:
         out = os.path.join(tmp, "result.json")
-        cmd = ["mpirun", "-n", str(k), "--bind-to", bind]
         if k > (os.cpu_count() or 1):
-            cmd.append("--oversubscribe")
+            # more ranks than cores: Open MPI refuses to bind two ranks to one core, so they float
+            cmd = ["mpirun", "-n", str(k), "--bind-to", "none", "--oversubscribe"]
+        else:
+            cmd = ["mpirun", "-n", str(k), "--bind-to", bind]
         mode, steps, case, variant = args
         cmd += [sys.executable, "-m", "pmpm.benchmarks.ranks", "--child", mode, out, "--steps", steps,
                 "--case", case, "--variant", variant]
