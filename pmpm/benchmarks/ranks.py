@@ -130,11 +130,14 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
     try:
         case = os.path.join(tmp, os.path.basename(scene_file))
         if comm.rank == 0:
-            # the copy sits beside the scene's own data folders (a record file, say) as links
+            # the copy sits beside the scene's own data folders (a record file, say) as links;
+            # never its output folder, so the run writes only into the temporary one
             shutil.copy(scene_file, case)
             here = os.path.dirname(os.path.abspath(scene_file))
+            output = load_scene(scene_file, variant)[0].output.directory
+            writes = os.path.normpath(output).split(os.sep)[0]
             for entry in os.listdir(here):
-                if os.path.isdir(os.path.join(here, entry)) and not entry.endswith("_results"):
+                if os.path.isdir(os.path.join(here, entry)) and entry != writes and not entry.endswith("_results"):
                     os.symlink(os.path.join(here, entry), os.path.join(tmp, entry))
         comm.Barrier()
         scene = load_scene(case, variant, overrides={"solver.max_steps": steps + WARM_STEPS})[0]
