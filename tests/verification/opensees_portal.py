@@ -1,7 +1,8 @@
 """Cross-check of frame2d_model.py with OpenSeesPy (a script, not a test: OpenSeesPy is not a
 dependency of pmpm).
 
-The portal of cases/portal_frame.toml with the idealisation of frame2d_model.py, built in
+The portal of cases/portal_frame.toml with the idealisation of frame2d_model.py's
+``joints="scissors"`` (Krawinkler's panel), built in
 OpenSees: members of 8 ``ElasticTimoshenkoBeam`` elements (shear area d t_w, consistent mass),
 rigid offsets into the joints as stiff massless ``elasticBeamColumn`` links, the joint panel as
 a rotational ``zeroLength`` spring G d_c t_w d_b between the column node and the beams' node
@@ -110,7 +111,7 @@ def main():
     case = os.path.join(HERE, "..", "..", "cases", "portal_frame.toml")
     for support in ("fixed", "pinned"):
         periods, drift = portal(ops, support)
-        model = frame2d_model.from_scene(case, supports=support)
+        model = frame2d_model.from_scene(case, supports=support, joints="scissors")
         ours = model.modes(3)[0]
         ours_drift = model.static()[model.node_dofs["upper_left_joint"][0]]
         print(f"{support}: OpenSees T = {', '.join(f'{t * 1e3:.3f}' for t in periods)} ms, drift "
