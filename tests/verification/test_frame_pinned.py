@@ -16,9 +16,9 @@ elastic, at the case's 0.05 m cells:
     same strips (frame_fe_model.py, scikit-fem, 9-node quadrilaterals; shares no code with
     pmpm) with a point pin at each column axis, refined twice; the MPM period, from the first
     two crossings of half the first peak, within 3% (the issue's bound). The Timoshenko frame
-    model with joint panels (frame2d_model.py) is printed beside it: for the pinned portal it
-    is about 4% shorter than both continuum models (docs/portal_frame.md, "Pinned bases"),
-    for the fixed one about 1%.
+    model (frame2d_model.py, continuous joints) is printed beside it: for the pinned portal it
+    is 3.3% shorter than the FE model (docs/portal_frame.md, "Pinned bases"; its knee joints are
+    stiffer than the continuum's), for the fixed one about 1%.
 
 The pinned portal is four to five times as flexible as the fixed one: under the main job's
 444.82 kN its joint would sway 0.26 m and a flange corner of a rotating base would leave the
