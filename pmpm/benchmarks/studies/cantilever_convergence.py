@@ -34,6 +34,8 @@ import time
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
     os.path.abspath(__file__))))), "cases", "hard", "cantilever_large_rotation.toml")
 MATERIALS = ("neo_hookean", "linear_elastic")
@@ -58,7 +60,6 @@ def fe_curve():
 #: solution stays on the smooth branch (at 8 the compressed root creases at t ~ 1.45 s,
 #: docs/hard_cases.md); 6 and 7 differ by 0.003 m RMS
 REFERENCE_DEPTH = 7
-_TESTS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(CASE))), "tests", "verification")
 _reference_cache = {}
 
 
@@ -66,11 +67,7 @@ def reference_history(depth=REFERENCE_DEPTH):
     """(t, uy) of the lower free corner from the independent FE model (converged mesh),
     computed once per process (about 15 s at 7 elements through the depth)."""
     if depth not in _reference_cache:
-        sys.path.insert(0, os.path.abspath(_TESTS))
-        try:
-            import cantilever_fe_model
-        finally:
-            sys.path.pop(0)
+        cantilever_fe_model = verification_models.load("cantilever_fe_model")
         t, uy, _, _ = cantilever_fe_model.corner_history(depth)
         _reference_cache[depth] = (t, uy)
     return _reference_cache[depth]

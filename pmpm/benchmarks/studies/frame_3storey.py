@@ -49,12 +49,13 @@ import time
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 __all__ = ["frame_model", "continuum_reference", "mode_pattern", "with_joint_forces", "scene_at", "run_cell", "fit_periods", "compare",
            "compare_mode", "main"]
 
 _ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
 CASE = os.path.join(_ROOT, "cases", "frame_3storey.toml")
-_TESTS = os.path.join(_ROOT, "tests", "verification")
 #: the tracked left joints of floors 2, 3 and the roof (frame node names)
 JOINTS = ("c0_f1", "c0_f2", "c0_f3")
 STOREY_HEIGHT = 3.96
@@ -65,26 +66,15 @@ FIRST_PEAK_WINDOW = 0.7
 
 def frame_model(scene=CASE):
     """The independent frame model of ``scene`` (tests/verification/frame2d_model.py)."""
-    if not os.path.exists(os.path.join(_TESTS, "frame2d_model.py")):
-        raise RuntimeError("tests/verification/frame2d_model.py not found next to this package")
-    sys.path.insert(0, _TESTS)
-    try:
-        import frame2d_model
-    finally:
-        sys.path.pop(0)
-    return frame2d_model.from_scene(scene, variant="elastic")
+    return verification_models.load("frame2d_model").from_scene(scene, variant="elastic")
 
 
 def continuum_reference(levels=(0, 1, 2), h0=0.2, scene=CASE):
     """The plane-stress continuum of the same strips (tests/verification/frame3_fe_model.py,
     scikit-fem): its first three periods extrapolated from ``levels`` (Richardson), and the
     roof's first peak under the case's step loads on the finest mesh (about a minute)."""
-    sys.path.insert(0, _TESTS)
-    try:
-        import frame3_fe_model as f3
-        import frame_fe_model as fem
-    finally:
-        sys.path.pop(0)
+    f3 = verification_models.load("frame3_fe_model")
+    fem = verification_models.load("frame_fe_model")
     data = f3.read_scene3(scene)
     periods = []
     for level in levels:

@@ -23,21 +23,15 @@ import sys
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 __all__ = ["fe_module", "study", "markdown_table", "fit_history", "main"]
 
-_TESTS = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "verification"))
 
 
 def fe_module():
     """tests/verification/frame_fe_model.py (needs scikit-fem and scipy)."""
-    if not os.path.exists(os.path.join(_TESTS, "frame_fe_model.py")):
-        raise RuntimeError("tests/verification/frame_fe_model.py not found next to this package")
-    sys.path.insert(0, _TESTS)
-    try:
-        import frame_fe_model
-    finally:
-        sys.path.pop(0)
-    return frame_fe_model
+    return verification_models.load("frame_fe_model")
 
 
 def study(h0=0.2, levels=(0, 1, 2), n_modes=40, mode_counts=(5, 10, 20, 40, 80)):

@@ -29,6 +29,8 @@ import sys
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 __all__ = ["scaled_scene", "run_factor", "main"]
 
 CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
@@ -87,15 +89,7 @@ HINGE_OF_CUT = {"left_column_left_base": "left_base", "right_column_right_base":
 
 
 def _hinge_model():
-    here = os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "verification")
-    if not os.path.exists(os.path.join(here, "frame_hinge_model.py")):
-        raise RuntimeError("tests/verification/frame_hinge_model.py not found")
-    sys.path.insert(0, here)
-    try:
-        import frame_hinge_model
-    finally:
-        sys.path.pop(0)
-    return frame_hinge_model
+    return verification_models.load("frame_hinge_model")
 
 
 def compare(factor, outdir):

@@ -44,6 +44,8 @@ import time
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 __all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main",
            "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile",
            "analyse_histories", "sway_extrema"]
@@ -172,15 +174,9 @@ def oscillation_centre(t, u, period):
 def _beam_module():
     """tests/verification/frame_beam_model.py (NumPy only), or None when the tests are not next
     to this package."""
-    here = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "verification"))
-    if not os.path.exists(os.path.join(here, "frame_beam_model.py")):
+    if not verification_models.available("frame_beam_model"):
         return None
-    sys.path.insert(0, here)
-    try:
-        import frame_beam_model
-    finally:
-        sys.path.pop(0)
-    return frame_beam_model
+    return verification_models.load("frame_beam_model")
 
 
 def beam_reference(t_end):

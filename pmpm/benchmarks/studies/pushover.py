@@ -18,13 +18,13 @@ Run::
 import argparse
 import json
 import os
-import sys
 
 import numpy as np
 
+from pmpm.benchmarks.studies import verification_models
+
 __all__ = ["collapse_load", "fe_stiffness", "main"]
 
-_TESTS = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "verification"))
 
 
 def collapse_load(h5_path):
@@ -44,11 +44,7 @@ def collapse_load(h5_path):
 
 def fe_stiffness():
     """P / static drift of the FE model (levels 0-2 at h0 = 0.2 m, Richardson) and the drifts."""
-    sys.path.insert(0, _TESTS)
-    try:
-        import frame_fe_model as fem
-    finally:
-        sys.path.pop(0)
+    fem = verification_models.load("frame_fe_model")
     drifts = [fem.frame_fe(0.2, level).static()[1] for level in (0, 1, 2)]
     return fem.read_scene().load[0] / fem.richardson(drifts)[0], drifts
 
