@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 
 from pmpm.io.plot import _legend
-from pmpm.results.hinges import first_reached
+from pmpm.results.hinges import hinge_rows
 
 __all__ = ["plot_sections", "plot_reactions", "plot_utilisation", "plot_hinge_map", "plot_hysteresis"]
 logger = logging.getLogger(__name__)
@@ -75,26 +75,47 @@ def _outline(h5_path):
         return f[f"frames/{name}"][0] if f[f"frames/{name}"].shape[0] else np.zeros((0, 2))
 
 
+#: up to this many cuts, each is labelled on the map with its name and times; beyond it (a
+#: multi-storey frame has tens of cuts) the labels would cover the structure, so the cuts that
+#: yield are numbered in the order they yield and listed beside the map
+FULL_LABELS = 8
+
+
 def plot_hinge_map(h5_path, sections, path, label):
     """The structure (particles at rest) with every cut marked by the time it first reaches
-    My (open marker) and Mp (filled); cuts that reach neither are grey."""
+    My (open marker) and Mp (filled); cuts that reach neither are grey. With more than
+    FULL_LABELS cuts, the yielding cuts are numbered in the order they yield (hinge_rows) and
+    listed beside the map with their times and largest |M| / Mp."""
     pts = _outline(h5_path)
-    fig = _figure(figsize=(8, 5))
-    ax = fig.subplots()
+    rows = hinge_rows(sections)
+    many = len(rows) > FULL_LABELS
+    fig = _figure(figsize=(11, 5.5) if many else (8, 5))
+    if many:
+        fig.set_layout_engine(None)          # the map and its list are placed by hand
+    ax = fig.add_axes([0.06, 0.1, 0.56, 0.8]) if many else fig.subplots()
     ax.scatter(pts[:, 0], pts[:, 1], s=0.3, color="0.8", rasterized=True)
-    for name, s in sections.items():
-        a = s["attrs"]
-        if "Mp" not in a:
-            continue
-        c = np.asarray(a["center"])
-        t_y = first_reached(s["time"], s["M"], a["My"]) if "My" in a else math.nan
-        t_p = first_reached(s["time"], s["M"], a["Mp"])
+    order = [r["name"] for r in rows if math.isfinite(r["t_My"]) or math.isfinite(r["t_Mp"])]
+    width = max((len(n) for n in order), default=4)
+    listing = [f"{'':>2} {'cut':<{width}} {'My ms':>6} {'Mp ms':>6}  |M|/Mp"]
+    for r in rows:
+        s = sections[r["name"]]
+        c = np.asarray(s["attrs"]["center"])
+        t_y, t_p = r["t_My"], r["t_Mp"]
         colour = "tab:red" if math.isfinite(t_p) else ("tab:orange" if math.isfinite(t_y) else "0.5")
-        ax.plot(*c, "o", ms=9, color=colour, mfc=colour if math.isfinite(t_p) else "none", mew=2)
-        text = [name]
-        text.append(f"My at {t_y * 1e3:.1f} ms" if math.isfinite(t_y) else "My not reached")
-        text.append(f"Mp at {t_p * 1e3:.1f} ms" if math.isfinite(t_p) else "Mp not reached")
-        ax.annotate("\n".join(text), c, xytext=(8, 8), textcoords="offset points", fontsize=7)
+        ax.plot(*c, "o", ms=7 if many else 9, color=colour, mfc=colour if math.isfinite(t_p) else "none", mew=2)
+        times = [f"My at {t_y * 1e3:.1f} ms" if math.isfinite(t_y) else "My not reached",
+                 f"Mp at {t_p * 1e3:.1f} ms" if math.isfinite(t_p) else "Mp not reached"]
+        if not many:
+            ax.annotate("\n".join([r["name"]] + times), c, xytext=(8, 8), textcoords="offset points", fontsize=7)
+        elif r["name"] in order:
+            k = order.index(r["name"]) + 1
+            ax.annotate(str(k), c, xytext=(5, 5), textcoords="offset points", fontsize=8, weight="bold")
+            when = [f"{x * 1e3:6.1f}" if math.isfinite(x) else "     -" for x in (t_y, t_p)]
+            listing.append(f"{k:>2} {r['name']:<{width}} {when[0]} {when[1]}  {r['M/Mp']:.2f}")
+    if many:
+        quiet = len(rows) - len(order)
+        listing.append(f"{quiet} of {len(rows)} cuts below My (grey)" if quiet else f"all {len(rows)} cuts reach My")
+        fig.text(0.64, 0.9, "\n".join(listing), va="top", ha="left", fontsize=7, family="monospace")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
