@@ -31,7 +31,10 @@ __all__ = ["wait_all", "POLICY", "SPIN_SECONDS", "NAP_MIN_SECONDS", "NAP_MAX_SEC
 #: "nap" (spin, then sleep) or "spin" (never sleep)
 POLICY = os.environ.get("PMPM_MPI_WAIT", "nap")
 #: how long a wait spins before its first nap: a balanced neighbour's message arrives within this
-SPIN_SECONDS = 50e-6
+#: (on an idle 2-core machine the main job's rendezvous often wait 50-300 us: 50 us made two ranks
+#: 1.56x faster than one, 300 us 1.65-1.71x, and no slower under a background load; see
+#: docs/performance.md, "The spin phase")
+SPIN_SECONDS = 300e-6
 #: the first nap, doubled after each one up to NAP_MAX_SECONDS (the latest a message is noticed)
 NAP_MIN_SECONDS = 10e-6
 NAP_MAX_SECONDS = 200e-6
