@@ -473,7 +473,10 @@ def _gradient_corners(G, k, q, K, B, ox, oy):
 
 # The box loops, one function per kernel, called with the box's node counts (K or K + 1 per
 # axis) as constants: each of the four cases compiles with its loops unrolled (with the counts
-# read from the particle the loops stay rolled: measured 3-5% of each CPDI transfer).
+# read from the particle the loops stay rolled: measured 3-5% of each CPDI transfer). The
+# four-way branch is written out in each dispatcher rather than shared: a shared one would take
+# the loop as a function argument, whose numba type embeds its address and defeats the disk
+# cache (docs/performance.md, "What changed").
 
 @nb.njit(cache=True, inline="always")
 def _box_cases(okx, oky, K):
