@@ -21,7 +21,8 @@ import numpy as np
 
 from pmpm import __version__
 from pmpm.errors import ParticleExitError, UnstableRunError
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
+from pmpm.core.effects import energy_terms
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
 from pmpm.stop import make_stop_check
 from pmpm.results.recorder import UNITS, StructuralRecorder
@@ -29,10 +30,16 @@ from pmpm.results.recorder import UNITS, StructuralRecorder
 __all__ = ["Run", "output_path", "energy_summary"]
 logger = logging.getLogger(__name__)
 
-ENERGY_COLUMNS = ("time", "kinetic", "strain_energy", "plastic_work", "internal_work", "damping_work",
-                  "viscous_damping_work", "removed_energy", "external_work", "total", "numerical_loss")
+#: the energy columns of the results file: the solver's own energies around the registered
+#: energy terms (pmpm.core.effects: a material's dissipation, an effect's work), which every run
+#: writes (zero where the scene has no such effect)
+ENERGY_COLUMNS = ("time", "kinetic", "strain_energy",
+                  *[t.name for t in energy_terms() if not t.outside], "internal_work",
+                  *[t.name for t in energy_terms() if t.outside], "external_work", "total", "numerical_loss")
 #: the solver's name of an energy where the file's differs (the file keeps "strain" for the field)
 _SOLVER_ENERGY = {"strain_energy": "strain"}
+#: the energies a checkpoint keeps (rank-local accumulators, saved as their sum over the ranks)
+ACCUMULATED = ("external_work", "internal_work", *[t.name for t in energy_terms() if t.outside])
 
 
 def energy_summary(e):
@@ -102,6 +109,19 @@ def _healthy_fields(fields):
     return all(np.all(np.isfinite(a)) for k, a in fields.items() if a.dtype.kind == "f")
 
 
+def _accumulated(solver):
+    """This rank's shares of the energies a checkpoint keeps (``ACCUMULATED``)."""
+    return {k: getattr(solver, k) if k in ("external_work", "internal_work") else solver.effects.energy(k)
+            for k in ACCUMULATED}
+
+
+def _set_accumulated(solver, name, value):
+    if name in ("external_work", "internal_work"):
+        setattr(solver, name, value)
+    else:
+        solver.effects.set_energy(name, value)
+
+
 class _Snapshot:
     """A copy of the particle state a few steps back: what a failed run saves. ``reuse``: the
     snapshot this one replaces, whose arrays it overwrites where the shapes still match (the
@@ -118,11 +138,7 @@ class _Snapshot:
                 b = a.copy()
             self.fields[k] = b
         self.t, self.step, self.dt = solver.t, solver.step_count, solver.dt
-        self.external_work = solver.external_work
-        self.internal_work = solver.internal_work
-        self.damping_work = solver.damping_work
-        self.viscous_damping_work = solver.viscous_damping_work
-        self.removed_energy = solver.removed_energy
+        self.energies = _accumulated(solver)
 
 
 class Run:
@@ -144,8 +160,7 @@ class Run:
             # whoever built the scene (CLI, API, a script): no output name leaves the folder
             from pmpm.scene.config import check_written_scene
             check_written_scene(scene)
-        from pmpm.physics.contact import ContactSolver  # scene [contact]: one velocity field per body
-        self.solver = (Solver if scene.contact is None else ContactSolver)(scene, comm)
+        self.solver = build_solver(scene, comm)
         self.comm = self.solver.comm
         self.rank = self.comm.Get_rank()
         self.write = write
@@ -162,7 +177,8 @@ class Run:
         self.stop_check = make_stop_check(scene, self.solver)  # None without [[stop]]
         self.stopped = None
         s = self.solver
-        self.structural = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
+        self.structural = (StructuralRecorder(s) if (s.effect("sections") or s.effect("reactions") is not None)
+                           else None)
         self.output = None
         if write:
             self._make_directory()
@@ -365,15 +381,12 @@ class Run:
             # the scene changed cfl or time_step (allowed on restart): the new rule from now on
             s.vmax = s.decomp.allreduce_max(s._local_speed())
             s.dt = s.stable_dt(s.vmax)
-        s.external_work = float(attrs["external_work"]) if self.rank == 0 else 0.0
-        s.internal_work = float(attrs["internal_work"]) if self.rank == 0 else 0.0
+        for name in ACCUMULATED:   # the sums over the ranks: rank 0 holds them from now on
+            _set_accumulated(s, name, float(attrs.get(name, 0.0)) if self.rank == 0 else 0.0)
         s.initial_energy = float(attrs["initial_energy"])
-        s.damping_work = float(attrs.get("damping_work", 0.0)) if self.rank == 0 else 0.0
-        s.viscous_damping_work = float(attrs.get("viscous_damping_work", 0.0)) if self.rank == 0 else 0.0
-        s.removed_energy = float(attrs.get("removed_energy", 0.0)) if self.rank == 0 else 0.0
         s.removed = int(attrs.get("removed", 0))
-        for event in s.events:  # a body removed before the checkpoint is not in it
-            event.done = s.t >= event.time + event.duration * (1 - 1e-12)
+        for effect in s.effects:
+            effect.restore(s, attrs)
         self.restarted_from = s.t
         logger.info("restarted from %s at t = %.6g s (step %d)", path, s.t, s.step_count)
 
@@ -446,14 +459,11 @@ class Run:
         from pmpm.io.checkpoint import _next_slot
         target = path or (_next_slot(self._base()) if self.rank == 0 else None)
         self._ensure_space(target or self.path, s.n_total * self._row_bytes(snap.fields), replaces=target)
-        ext, internal, damped, viscous, removed = self.comm.allreduce(
-            np.array([snap.external_work, snap.internal_work, snap.damping_work, snap.viscous_damping_work,
-                      snap.removed_energy]))
+        sums = self.comm.allreduce(np.array([snap.energies[k] for k in ACCUMULATED]))
         return write_checkpoint(
             _checkpoint_base(self.path), self.comm, snap.t, snap.step, snap.fields,
-            {"time": snap.t, "step": snap.step, "dt": snap.dt, "external_work": float(ext),
-             "internal_work": float(internal), "damping_work": float(damped),
-             "viscous_damping_work": float(viscous), "removed_energy": float(removed),
+            {"time": snap.t, "step": snap.step, "dt": snap.dt,
+             **{k: float(v) for k, v in zip(ACCUMULATED, sums)},
              "initial_energy": s.initial_energy, "removed": s.removed, "n_total": s.n_total,
              "scene_file": _scene_location(self.scene.path, self.path), "variant": self.scene.variant,
              "pmpm_owner": self.scene.stem,
@@ -526,29 +536,17 @@ class Run:
     def effects(self):
         """The optional physics this scene switches on (nothing else is compiled in)."""
         s = self.solver
-        out = self.solver.loads.describe()
-        out += [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
+        out = [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
         if self.scene.solver.large_rotations:
             rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[self.scene.solver.objective_rate]
             out.append(f"large rotations ({rate} stress rate)" if s.rotates_stress else
                        "large rotations: no stress rotation (every material computes its stress from F)")
         if s.keeps_F:
             out.append("deformation gradient F per particle")
-        if s.rayleigh is not None:
-            out.append(s.rayleigh.describe())
-        elif s.damping is not None:
-            out.append(f"mass-proportional damping ({s.damping:g} 1/s)")
-        if s.ground is not None:
-            out.append(s.ground.describe())
-        if s.pushover is not None:
-            out.append(s.pushover.describe())
-        out += [e.describe() for e in s.events]
-        if s.transfer.name == "apic":
-            out.append("APIC transfer (affine velocity C per particle)")
-        elif s.transfer.name == "xpic":
-            out.append(f"XPIC({s.transfer.order}) transfer ({s.transfer.order - 1} extra grid-particle-grid passes per step)")
+        out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
+        out += s.transfer.describe()
         if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
-            out.append(s.describe())
+            out += s.describe()
         return out
 
     def execute(self):

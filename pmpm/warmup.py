@@ -12,29 +12,28 @@ logger = logging.getLogger(__name__)
 def warm_kernels(verbose=False):
     """Compile every kernel specialisation the shipped cases and tests use (fills the cache)."""
     from mpi4py import MPI
+    from pmpm.build import build_solver
     from pmpm.benchmarks.block import block_scene
-    from pmpm.core.solver import Solver
     for shape in ("cubic", "quadratic", "linear"):
         for scheme in ("musl", "usl", "usf"):
             for loads in (False, True):
-                s = Solver(block_scene(400, shape, scheme, gravity=loads, force=loads), MPI.COMM_SELF)
+                s = build_solver(block_scene(400, shape, scheme, gravity=loads, force=loads), MPI.COMM_SELF)
                 for _ in range(2):
                     s.step()
                 if verbose:
                     print(f"warm: {shape} {scheme} loads={loads}")
     # the shipped cases' extra specialisations: plasticity, and multi-field contact
     from pmpm.scene.config import load_scene
-    from pmpm.physics.contact import ContactSolver
     import os
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    for solver_class, case, variant in ((Solver, "portal_frame.toml", "elastoplastic"),
-                                        (ContactSolver, "disks_contact.toml", None),
-                                        # CPDI (cubic) with neo_hookean and with Green-Naghdi
-                                        (Solver, "hard/cantilever_large_rotation.toml", "neo_hookean_h0.25"),
-                                        (Solver, "hard/cantilever_large_rotation.toml", "linear_elastic_h0.25")):
+    for case, variant in (("portal_frame.toml", "elastoplastic"),
+                          ("disks_contact.toml", None),   # multi-field contact
+                          # CPDI (cubic) with neo_hookean and with Green-Naghdi
+                          ("hard/cantilever_large_rotation.toml", "neo_hookean_h0.25"),
+                          ("hard/cantilever_large_rotation.toml", "linear_elastic_h0.25")):
         path = os.path.join(root, "cases", case)
         if os.path.exists(path):
-            s = solver_class(load_scene(path, variant)[0], MPI.COMM_SELF)
+            s = build_solver(load_scene(path, variant)[0], MPI.COMM_SELF)
             for _ in range(2):
                 s.step()
 

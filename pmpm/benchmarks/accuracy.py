@@ -1,6 +1,6 @@
 """What accuracy costs in time: ``pmpm bench accuracy``.
 
-Two problems, each run in-process on one rank (``Solver(scene, MPI.COMM_SELF)``):
+Two problems, each run in-process on one rank (``build_solver(scene, MPI.COMM_SELF)``):
 
 * **bar** -- the fixed-free elastic bar of tests/verification/test_bar.py (L = 25, E = 100,
   rho = 1, one cell deep, nu = 0) started with v = v0 sin(beta x), v0 = 1e-3 (small amplitude,
@@ -136,11 +136,11 @@ def _timed_steps(solver, end, sample):
 def run_bar(cells, shape, scheme, ppc, v0=BAR_V0, cfl=0.5):
     """One bar run: error (max over the run of |u - u_exact| / amplitude) and its cost."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     scene = bar_scene(cells, shape, scheme, ppc, v0)
     if cfl != 0.5:   # replace(), not the scene parser: the bisection tries CFL numbers above 1
         scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, cfl=float(cfl)))
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     amp = v0 / BAR_OMEGA
     worst = [0.0]
 
@@ -199,10 +199,10 @@ def _first_peak(t, u):
 def run_frame(cell_size, shape, scheme, ppc, t_end=FRAME_T_END, cfl=STUDY_CFL):
     """One frame run: the first peak of the joint panel's mean ux and its cost."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     scene = frame_scene(cell_size, shape, scheme, ppc, t_end, cfl=cfl)
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     box = scene.loads.forces[0]
     p = s.particles
     x0 = p["x0"]
@@ -239,14 +239,14 @@ def warm_up(combos, log):
     """Compile every kernel specialisation the sweep uses: a few steps of the coarsest scene of
     each (problem, shape, scheme)."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     t0 = time.perf_counter()
     for problem, shape, scheme in sorted(combos):
         if problem == "bar":
             scene = bar_scene(10, shape, scheme, 2)
         else:
             scene = frame_scene(0.1, shape, scheme, 2)
-        s = Solver(scene, MPI.COMM_SELF)
+        s = build_solver(scene, MPI.COMM_SELF)
         for _ in range(3):
             s.step()
     print(f"[accuracy] warm-up (kernel compilation) {time.perf_counter() - t0:.1f} s", file=log, flush=True)

@@ -112,10 +112,10 @@ def run_setting(setting, t_end=T_END):
     """Run one setting: the joint's ux every SAMPLE, the energies at the end and the cost."""
     from mpi4py import MPI
     from pmpm.benchmarks.accuracy import _timed_steps
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     scene = frame_scene(setting, t_end)
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracker = Tracker([tr for tr in scene.output.track if tr.name == TRACK], s)
     t, u, work = [0.0], [0.0], [0.0]
     nxt = [SAMPLE]

@@ -40,13 +40,13 @@ def frame_scene(variant="elastic"):
 def _cases(sizes, material, frames, whole_window):
     """(scene label, tiles on, solver) of every case, the blocks first."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     scenes = [("block", block_scene(n, material=material)) for n in sizes]
     scenes += [(f"{FRAME} {v}", frame_scene(v)) for v in frames]
     cases = []
     for tiles in ((True, False) if whole_window else (None,)):
         for label, scene in scenes:
-            s = Solver(scene, MPI.COMM_SELF)
+            s = build_solver(scene, MPI.COMM_SELF)
             s.default_tile = s.window.tile   # what the solver chose (pmpm.core.grid.choose_tile)
             if whole_window:                 # both ways, whatever the default
                 s.window.use_tiles(TILE if tiles else 0)

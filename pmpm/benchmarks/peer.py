@@ -48,12 +48,12 @@ class PmpmSide:
 
     def __init__(self, particles, shape="cubic"):
         from mpi4py import MPI
-        from pmpm.core.solver import Solver
+        from pmpm.build import build_solver
         if shape != "cubic":
             self.name = f"pmpm_{shape}"
         self.label = f"pmpm MUSL ({shape})"
         self.scene = block_scene(particles, shape, "musl", "elastic")
-        self.solver = Solver(self.scene, MPI.COMM_SELF)
+        self.solver = build_solver(self.scene, MPI.COMM_SELF)
         self.n = self.solver.particles.n
 
     def run(self, steps):

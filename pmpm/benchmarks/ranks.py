@@ -121,7 +121,7 @@ def _mpirun(k, bind, args, env=None):
 def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
     """Under mpirun: run the scene (``mode`` "run", "solver" or "phases") and write its figures."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.scene.config import load_scene
     comm = MPI.COMM_WORLD
     tmp = comm.bcast(tempfile.mkdtemp(prefix="pmpm_ranks_run_") if comm.rank == 0 else None)
@@ -141,7 +141,7 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
                     os.symlink(os.path.join(here, entry), os.path.join(tmp, entry))
         comm.Barrier()
         scene = load_scene(case, variant, overrides={"solver.max_steps": steps + WARM_STEPS})[0]
-        warm = Solver(scene, comm)  # the kernels read from numba's cache, outside the timing
+        warm = build_solver(scene, comm)  # the kernels read from numba's cache, outside the timing
         for _ in range(WARM_STEPS):
             warm.step()
         particles = comm.allreduce(warm.particles.n)
@@ -149,7 +149,7 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
         record = {"ranks": comm.size, "steps": steps, "mode": mode, "particles_total": particles}
         if mode == "phases":
             from pmpm.benchmarks.phase_profile import phase_times
-            s = Solver(scene, comm)
+            s = build_solver(scene, comm)
             for _ in range(WARM_STEPS):
                 s.step()
             comm.Barrier()
@@ -164,7 +164,7 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
                 run = Run(scene, comm)
                 go = run.execute
             else:
-                s = Solver(scene, comm)
+                s = build_solver(scene, comm)
 
                 def go():
                     for _ in range(steps + WARM_STEPS):

@@ -43,10 +43,10 @@ def _measure(solver, steps):
 def _reference_cpu(scene_fn, total, steps, comm):
     """CPU time of the same work on one rank (rank 0 alone; the others sleep, not spin)."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     cpu = None
     if comm.rank == 0:
-        s = Solver(scene_fn(total), MPI.COMM_SELF)
+        s = build_solver(scene_fn(total), MPI.COMM_SELF)
         for _ in range(2):
             s.step()
         cpu = min(_measure(s, steps)[0] for _ in range(2))
@@ -59,7 +59,7 @@ def scaling(args):
     """Run the benchmark under the current MPI world; prints a table and a JSON line."""
     from mpi4py import MPI
     from pmpm.benchmarks.block import block_scene
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     comm = MPI.COMM_WORLD
     size, rank = comm.size, comm.rank
     total = args.particles * (size if args.mode == "weak" else 1)
@@ -69,7 +69,7 @@ def scaling(args):
         return block_scene(n, ppc=args.ppc, aspect=aspect, extra_solver={"sort_interval": 20})
 
     ref_cpu = _reference_cpu(scene_fn, total, args.steps, comm) if size > 1 else None
-    solver = Solver(scene_fn(total), comm)
+    solver = build_solver(scene_fn(total), comm)
     for _ in range(2):
         solver.step()
     runs = [_measure(solver, args.steps) for _ in range(args.repeat)]

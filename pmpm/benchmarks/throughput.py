@@ -99,12 +99,12 @@ def step_bytes_per_particle(solver):
 def throughput(args):
     """Particle-steps per second of one rank on an elastic (or plastic) block."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     t0 = time.perf_counter()
     interp = getattr(args, "interpolation", "point")
     extra = None if interp == "point" else {"interpolation": interp}
     track_F = getattr(args, "track_F", False)
-    warm = Solver(block_scene(1000, args.shape, args.scheme, args.material, extra_solver=extra,
+    warm = build_solver(block_scene(1000, args.shape, args.scheme, args.material, extra_solver=extra,
                               track_F=track_F), MPI.COMM_SELF)
     for _ in range(3):
         warm.step()
@@ -116,7 +116,7 @@ def throughput(args):
     results = []
     for n in args.particles:
         base = _memory_baseline()
-        solver = Solver(block_scene(n, args.shape, args.scheme, args.material, extra_solver=extra,
+        solver = build_solver(block_scene(n, args.shape, args.scheme, args.material, extra_solver=extra,
                                     track_F=track_F),
                         MPI.COMM_SELF)
         for _ in range(YIELD_AFTER_STEPS):  # first-touch of the arrays; a plastic block yields
@@ -195,12 +195,12 @@ def effects(args):
     import os
     import tempfile
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     with tempfile.TemporaryDirectory() as tmp:
         record = os.path.join(tmp, "record.txt")
         t = np.linspace(0.0, 10.0, 2001)
         np.savetxt(record, np.column_stack([t, 0.5 * np.sin(2 * np.pi * t)]))
-        solvers = {name: Solver(scene, MPI.COMM_SELF) for name, scene in _effect_scenes(args.particles, record).items()}
+        solvers = {name: build_solver(scene, MPI.COMM_SELF) for name, scene in _effect_scenes(args.particles, record).items()}
         for s in solvers.values():  # compile, first-touch, and the plastic block yields
             for _ in range(YIELD_AFTER_STEPS):
                 s.step()

@@ -1,4 +1,4 @@
-"""The explicit MPM solver: owns the grid window, particles, materials, scheme and loads.
+"""The explicit MPM solver: the step's fixed phases over the parts of a run.
 
 One step (paper section 3, steps 1-10) is the scheme's ordered list of phases, each a short
 method here that calls one numba kernel or one exchange::
@@ -6,6 +6,10 @@ method here that calls one numba kernel or one exchange::
     reset_grid -> particles_to_grid -> exchange_halo -> update_grid -> grid_to_particles
     -> [MUSL: exchange_halo (re-map) -> grid_velocity] -> update_strain -> update_stress
     -> migrate -> next time step
+
+The optional physics a scene names (loads, ground motion, damping, supports, events, ...) are
+effects (pmpm.core.effects): the phases call their hooks at fixed places, and know none of them
+by name. The solver is built from a scene by pmpm.build.build_solver and holds no scene.
 
 The serial run is the one-rank case of the same code: the halo exchange and the migration are
 no-ops there, nothing else changes.
@@ -19,34 +23,19 @@ one reduction.
 """
 import logging
 import math
-import time
+from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
 
-from decomposition import alltoallv_fields, get_comm, wait_all
+from decomposition import alltoallv_fields, wait_all
 from pmpm.core import kernels as K
-from pmpm.physics.boundary import apply_boundary_masks, check_boundaries, check_boxes_hold
-from pmpm.physics.supports import HeldFaces
+from pmpm.core.effects import EffectList, energy_terms
+from pmpm.core.grid import GridWindow, choose_tile
+from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, shape_argument
 from pmpm.errors import ParticleExitError, UnstableRunError
-from pmpm.core.grid import Grid, GridWindow, choose_tile
-from pmpm.physics.damping import RayleighDamping, undamped_cfl_limit
-from pmpm.physics.groundmotion import GroundMotion
-from pmpm.physics.events import make_events
-from pmpm.physics.pushover import Pushover
-from pmpm.physics.loads import Loads
-from pmpm.physics.materials import make_material
-from pmpm.core.schemes import make_scheme
-from pmpm.core.transfers import make_transfer
-from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
-from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
-from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, min_cells, shape_argument
-from pmpm.errors import ConfigError
-from pmpm.results.reactions import Reactions
-from pmpm.results.sections import make_cuts
-from pmpm.scene.limits import check_memory, check_time_step
 
-__all__ = ["Solver", "needs_deformation_gradient", "numerical_loss"]
+__all__ = ["Solver", "StepOptions", "numerical_loss"]
 logger = logging.getLogger(__name__)
 
 #: steps between energy checks (each is one pass over the particles and one allreduce)
@@ -56,28 +45,10 @@ ENERGY_CHECK_INTERVAL = 10
 ENERGY_GROWTH_LIMIT = 0.5
 
 
-def needs_deformation_gradient(scene, materials):
-    """Whether the run keeps the deformation gradient F per particle: a material that needs it
-    (hyperelastic), the Green-Naghdi rate (the rotation of F), CPDI (its particle domains are
-    F times the initial ones), or an output field ``F``.
-    Otherwise F is neither stored nor updated (the kernels get None and compile it out).
-
-    Parameters
-    ----------
-    scene : pmpm.scene.config.Scene
-    materials : list of pmpm.physics.materials.Material
-    """
-    cfg = scene.solver
-    return (any(m.needs_deformation_gradient for m in materials)
-            or (cfg.large_rotations and cfg.objective_rate == "green_naghdi")
-            or cfg.interpolation == "cpdi"
-            or "F" in scene.output.fields)
-
-
-def numerical_loss(initial, external, kinetic, strain, plastic, damping, viscous=0.0, removed=0.0):
+def numerical_loss(initial, external, kinetic, strain, *held):
     """The energy lost to the discretisation (J): what the loads and the initial state put in
     and no physical term holds, dissipated or took out of the run,
-    ``initial + external - kinetic - strain - plastic - damping - viscous - removed``.
+    ``initial + external - kinetic - strain - sum(held)``.
 
     ``initial`` is the energy at the start (``Solver.initial_energy``: the kinetic energy, the
     bodies start unstressed). Positive: energy lost (numerical damping of the transfers and
@@ -87,131 +58,106 @@ def numerical_loss(initial, external, kinetic, strain, plastic, damping, viscous
 
     Parameters
     ----------
-    initial, external, kinetic, strain, plastic, damping : float or numpy.ndarray
-        The energies in J, as ``Solver.energies`` names them (plastic: the plastic work,
-        damping: the work of mass-proportional damping).
-    viscous, removed : float or numpy.ndarray, optional
-        The work of Rayleigh damping's stiffness part and the energy of the particles a scene
-        event removed (J; zero where the scene has neither).
+    initial, external, kinetic, strain : float or numpy.ndarray
+        The energies in J, as ``Solver.energies`` names them.
+    *held : float or numpy.ndarray
+        Every registered energy term (pmpm.core.effects): what the materials dissipated
+        (plastic work) and what the effects took out (damping works, energy an event removed).
     """
-    return initial + external - kinetic - strain - plastic - damping - viscous - removed
+    loss = initial + external - kinetic - strain
+    for term in held:
+        loss = loss - term
+    return loss
 
 
-def _scene_dir(scene):
-    import os
-    return os.path.dirname(scene.path) if os.path.isabs(scene.path) else "."
+@dataclass(frozen=True)
+class StepOptions:
+    """The settings the step reads (the scene's ``[solver]`` and ``[parallel]``, resolved by
+    pmpm.build): basis, time step rule, end time, sorting, rebalancing and exits."""
+
+    shape_function: str = "cubic"
+    interpolation: str = "point"
+    end_time: float = 1.0
+    cfl: float = 0.5
+    time_step: float = None
+    sort_interval: int = 0
+    on_particle_exit: str = "error"
+    objective_rate: str = "jaumann"
+    plane_stress: bool = True
+    rebalance_threshold: float = None
+    rebalance_interval: int = 1
 
 
 class Solver:
-    """Explicit MPM on the ranks of ``comm`` (``None``: COMM_WORLD).
+    """Explicit MPM on the ranks of ``decomp``: the step's fixed phases over the parts a run is
+    built from (pmpm.build.build_solver builds them from a scene).
 
     Parameters
     ----------
-    scene : pmpm.scene.config.Scene
-    comm : mpi4py communicator, optional
+    grid : pmpm.core.grid.Grid
+    decomp : decomposition.SlabDecomposition
+        Also the communicator (``decomp.comm``) and the slab axis.
+    particles : pmpm.core.particles.Particles
+        This rank's particles, every field the run keeps already there.
+    materials : list of pmpm.physics.materials.Material
+    scheme, transfer : the strategies of pmpm.core.schemes and pmpm.core.transfers
+    effects : iterable of pmpm.core.effects.Effect
+        The effects the scene names (pmpm.core.effects), in registry order.
+    options : StepOptions
+    n_total : int
+        Particles of the whole run (the ids are 0 .. n_total - 1).
+    mass_cutoff : float
+        The scene's relative nodal mass cutoff (times the largest particle mass here).
+    keeps_F, rotates_stress : bool
+        Whether the particles keep F, and whether the objective rate rotates the stresses.
     """
 
-    def __init__(self, scene, comm=None):
-        self.scene = scene
-        self.comm = get_comm(comm)
-        cfg = scene.solver
-        self.grid = Grid(scene.grid.origin, scene.grid.cell_size, scene.grid.cells)
-        self.interpolation = cfg.interpolation
-        need = min_cells(cfg.shape_function, cfg.interpolation)
-        if min(self.grid.cells) < need:
-            raise ConfigError("grid.cells", f"{cfg.shape_function} B-splines"
-                              f"{'' if cfg.interpolation == 'point' else ' with ' + cfg.interpolation}"
-                              f" need at least {need} cells per axis")
-        self.labels = list(scene.materials)
-        self.materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation)
-                          for k in self.labels]
-        # before anything big is allocated: this rank's share of grid window and particles
-        local = self.comm.Split_type(MPI.COMM_TYPE_SHARED) if self.comm.Get_size() > 1 else None
-        check_memory(scene, self.comm.Get_size(), local.Get_size() if local else 1,
-                     state_floats=sum(int(np.prod(f)) for m in self.materials for f in m.state_fields.values()))
-        if local is not None:
-            local.Free()
-        self.scheme = make_scheme(cfg.scheme)
-        self.transfer = make_transfer(cfg.transfer, **({"order": cfg.xpic_order} if cfg.transfer == "xpic" else {}))
-        self.loads = Loads(scene.loads)
-        check_boundaries(scene.boundaries, self.grid)
-        self.ground = (GroundMotion(scene.loads.ground_motion, scene.boundaries, _scene_dir(scene))
-                       if scene.loads.ground_motion else None)
-        self.pushover = Pushover(scene.pushover, scene.boundaries) if scene.pushover else None
-        self.events = make_events(scene.events, scene.bodies)   # [] without [[events]]
-        # Rayleigh damping by ratio: its mass part is the nodal mass-proportional damping, its
-        # stiffness part a viscous stress on the particles (None: neither exists in the step)
-        self.rayleigh = (RayleighDamping(scene.loads.rayleigh, self.materials)
-                         if scene.loads.rayleigh else None)
-        mass_part = self.rayleigh.a0 if self.rayleigh is not None else scene.loads.damping
-        self.damping = mass_part or None  # None compiles the damping out
-        points = place_points(scene, self.grid, self.materials, self.labels)
-        check_boxes_hold(scene.boundaries, self.grid, points["x"],
-                         ghost_width(cfg.shape_function, cfg.interpolation))
-        # supports attached to a body hold its face's particles (None: the scene has none)
-        self.supports = (HeldFaces(scene.boundaries, scene.bodies, points, self.grid)
-                         if any(b.body is not None for b in scene.boundaries) else None)
-        if self.supports is not None and scene.contact is not None:
-            k = self.supports.index[0]
-            raise ConfigError(f"boundary[{k}]", "a boundary attached to a body does not work with [contact] "
-                                                "(give it a box)")
-        self.n_total = len(points["m"])
-        # structural results the scene asks for (nothing is set up or computed otherwise)
-        self.sections = make_cuts(scene, self.grid, points) if scene.output.sections else []
-        self.reactions = (Reactions(scene.boundaries, self.grid, self.supports.centroids if self.supports else None)
-                          if any(b.reaction for b in scene.boundaries) else None)
-        self.axis = choose_axis(scene.parallel.axis, self.grid)
-        self.decomp = make_decomposition(self.comm, self.grid, self.axis,
-                                         ghost_width(cfg.shape_function, cfg.interpolation), points["x"])
-        optional = [f for f in scene.output.fields
-                    if f in OPTIONAL_FIELDS or any(f in m.diagnostic_fields for m in self.materials)]
-        self.keeps_F = needs_deformation_gradient(scene, self.materials)
-        # the objective rate rotates stresses only a rate-form material integrates: a model that
-        # computes its stress from F (neo-Hookean) overwrites a rotated stress unread
-        self.rotates_stress = cfg.large_rotations and not all(
-            m.stress_from_F and not m.tensor_state_fields for m in self.materials)
-        self.particles = create_particles(points, self._owned(points["x"]), self.materials, optional)
-        if self.keeps_F:
-            start_deformation(self.particles)
-        if self.supports is not None:
-            self.supports.mark(self.particles)
-        if self.rayleigh is not None:
-            self.rayleigh.add_fields(self.particles)
-        for name, shape in self.transfer.fields.items():   # APIC's affine velocity; none for FLIP
-            self.particles.add_field(name, shape)
-        if self.interpolation != "point":
-            self._add_domains()
+    def __init__(self, grid, decomp, particles, materials, scheme, transfer, effects, options, n_total,
+                 mass_cutoff=0.0, keeps_F=False, rotates_stress=False):
+        self.grid, self.decomp, self.particles = grid, decomp, particles
+        self.comm = decomp.comm
+        self.axis = decomp.axis
+        self.materials = materials
+        self.scheme, self.transfer = scheme, transfer
+        self.options = options
+        self.interpolation = options.interpolation
+        self.n_total = n_total
+        self.keeps_F, self.rotates_stress = keeps_F, rotates_stress
+        self.set_effects(effects)
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
         # particle]); read and reset after every step (``_check_and_next_dt``)
         self._corner_escape = np.array([0, -1], dtype=np.int64)
-        del points
-        self.loads.assign(self.particles.fields, self.decomp.allreduce_sum)
         self._build_window()
         self.wave_speed = max(m.wave_speed() for m in self.materials)
-        self.mass_cutoff = cfg.mass_cutoff * self.decomp.allreduce_max(
+        self.mass_cutoff = mass_cutoff * self.decomp.allreduce_max(
             float(self.particles["m"].max()) if self.particles.n else 0.0)
         self.t = 0.0
         self.step_count = 0
         self.external_work = 0.0   # this rank's share; summed when reported
         self.internal_work = 0.0   # likewise: sum of V sigma : d_eps over this rank's particles
-        self.damping_work = 0.0    # energy taken out by mass-proportional damping (owned nodes)
-        self.removed_energy = 0.0  # kinetic energy carried out by particles an event removed
         self.removed = 0
         self.rebalances = 0
         self.vmax = self.decomp.allreduce_max(self._local_speed())
         self.dt = self.stable_dt(self.vmax)
-        check_time_step(scene, self.materials, self.vmax)  # positive, finite, not too many steps
         self._vmax_healthy = self.vmax
         self.healthy_step = -1  # step count of the newest state that passed check_energy
         self.initial_energy = self.energies()["total"]
 
-    # -- set-up helpers ---------------------------------------------------------------------
-    def _owned(self, x):
-        cols = K.cell_columns(x, self.grid.origin, self.grid.inv_h, self.axis)
-        return self.decomp.owner_of_columns(cols) == self.decomp.rank
+    def set_effects(self, effects):
+        """Run with ``effects`` (pmpm.core.effects) from now on: their hooks and the kernels'
+        body acceleration and nodal damping (tests switch one off to compare)."""
+        self.effects = effects if isinstance(effects, EffectList) else EffectList(effects)
+        self.gravity = self.effects.body_acceleration    # None compiles gravity out
+        self.damping = self.effects.nodal_damping        # None compiles the damping out
+        self._hooks = self.effects.hooks
 
+    def effect(self, name):
+        """The run's effect registered as ``name`` (pmpm.core.effects), or None."""
+        return self.effects.get(name)
+
+    # -- set-up helpers ---------------------------------------------------------------------
     def _build_window(self):
-        cfg = self.scene.solver
+        cfg = self.options
         self.window = GridWindow(self.grid, self.axis, self.decomp.window,
                                  reach=ghost_width(cfg.shape_function, cfg.interpolation),
                                  halo=self._halo_columns())
@@ -222,15 +168,10 @@ class Solver:
                                               self.particles.n))
         else:
             self.window.use_tiles(0)
-        apply_boundary_masks(self.window, self.scene.boundaries)
-        if self.reactions is not None:
-            self.reactions.bind(self.window, self.scene.boundaries)
         w0 = self.decomp.window[0]
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
-        if self.ground is not None:
-            self.ground.bind(self.window)
-        if self.pushover is not None:
-            self.pushover.bind(self.window)
+        for bind in self._hooks["on_window"]:   # boundary masks, reactions, driven nodes
+            bind(self)
 
     def _halo_columns(self):
         """Window columns at the lower and upper end that the halo exchange reads or writes:
@@ -242,24 +183,13 @@ class Solver:
         upper = w1 - max(n1 - g, w0) if d.upper != MPI.PROC_NULL else 0
         return lower, upper
 
-    def _initial_domains(self, vol, body):
-        """The GIMP particle domains: half-lengths (cells) of the square of the particle's area,
-        (h / ppc) / 2 for a body filled on a lattice, capped at ``MAX_HALF_LENGTH``."""
-        thickness = np.array([b.thickness for b in self.scene.bodies])[body]
-        half = 0.5 * np.sqrt(vol / thickness) * self.grid.inv_h
-        return np.repeat(np.minimum(half, MAX_HALF_LENGTH)[:, None], 2, axis=1)
-
-    def _add_domains(self):
-        p = self.particles
-        p["domain"] = self._initial_domains(p["vol"], p["body"])
-
     @property
     def shape(self):
         """The ``shape`` argument of the transfer kernels: the point B-spline tag, or the GIMP
         pair (tag, the particles' current domain array: rebuilt since sorting and migration
         replace the arrays), or the CPDI tuple (tag, domain, F, the step's corner report)."""
         f = self.particles.fields
-        return shape_argument(self.scene.solver.shape_function, self.interpolation,
+        return shape_argument(self.options.shape_function, self.interpolation,
                               f.get("domain"), f.get("F"), self._corner_escape)
 
     def _local_speed(self):
@@ -267,14 +197,13 @@ class Solver:
         return float(np.sqrt((v * v).sum(axis=1)).max()) if len(v) else 0.0
 
     def stable_dt(self, vmax):
-        """CFL time step C h / (c + |v|max), or the scene's fixed step."""
-        if self.scene.solver.time_step is not None:
-            return self.scene.solver.time_step
-        dt = self.scene.solver.cfl * self.grid.h / (self.wave_speed + vmax)
-        if self.rayleigh is not None:  # the viscous stress shortens the stable step
-            cfg = self.scene.solver
-            dt *= self.rayleigh.stable_step_factor(self.wave_speed + vmax, self.grid.h,
-                                                   undamped_cfl_limit(cfg.shape_function, cfg.interpolation))
+        """CFL time step C h / (c + |v|max) (shortened by the effects that damp the highest
+        modes), or the scene's fixed step."""
+        if self.options.time_step is not None:
+            return self.options.time_step
+        dt = self.options.cfl * self.grid.h / (self.wave_speed + vmax)
+        for limit in self._hooks["limit_dt"]:
+            dt = limit(dt, self.wave_speed + vmax, self)
         return dt
 
     def critical_dt(self):
@@ -303,28 +232,24 @@ class Solver:
 
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        p = self.particles
         self.transfer.p2g(self, momentum, forces)
-        point = self.loads.point_forces(p, self.t) if forces else None
-        if point is not None:
-            idx, load_id, load_w, load_vec = point
-            K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *self._geometry())
+        if forces:
+            for scatter in self._hooks["scatter_forces"]:   # point loads
+                scatter(self)
 
     def force_stress(self):
-        """The stress whose divergence is the internal force: the particles' stress, plus the
-        viscous stress of Rayleigh damping when the scene asks for it, with the rows of a body
-        being removed scaled down (pmpm.physics.events). Without either, the stress itself."""
+        """The stress whose divergence is the internal force: the particles' stress as the
+        effects edit it (the viscous stress of Rayleigh damping added, the rows of a body being
+        removed scaled down: pmpm.physics), in registry order. Without an effect editing it
+        this step, the stress array itself."""
         p = self.particles
-        fading = [e for e in self.events if e.active(self.t)] if self.events else ()
-        if self.rayleigh is None and not fading:
+        editors = [e for e in self.effects.stress_editors if e.edits_force_stress(self.t)]
+        if not editors:
             return p["stress"]
         out = self._scratch("_force_stress_buf", (p.n, 3))
-        if self.rayleigh is not None:
-            self.rayleigh.force_stress(p["stress"], p[self.rayleigh.FIELD], out)
-        else:
-            out[...] = p["stress"][:, :3]
-        for event in fading:
-            event.scale_force_stress(p, out, self.t)
+        out[...] = p["stress"][:, :3]
+        for effect in editors:
+            effect.add_force_stress(self, out)
         return out
 
     def exchange_halo(self, fields):
@@ -336,26 +261,22 @@ class Solver:
         """Steps 7-8 / eq. 3-4: (mv) += f dt (with damping if asked), essential BCs (moving
         with the ground if asked); fields become v and dv."""
         w = self.window
-        if self.ground is not None:
-            self.ground.apply(w, self.t + dt)
-        if self.pushover is not None:
-            self.pushover.apply(w, self.t + dt)
-        react = self.reactions.kernel_arg() if self.reactions is not None else None
+        for prescribe in self._hooks["before_grid_update"]:   # ground motion, pushover
+            prescribe(self, self.t + dt)
         damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
                                           0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
-                                          react, w.tiles)
-        self.damping_work += damped
+                                          self.effects.grid_reaction(), w.tiles)
         self.external_work += reactions  # supports are external: their work enters the balance
-        if self.supports is not None:
-            self.supports.project(self, K.MOM, impulse=True)
+        for after in self._hooks["after_grid_update"]:   # damping work, held faces
+            after(self, damped)
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         w = self.window
         K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
                                0, w.shape[0], 0, w.shape[1], w.tiles)
-        if self.supports is not None:
-            self.supports.project(self, target)
+        for after in self._hooks["after_grid_velocity"]:
+            after(self, target)
 
     def grid_to_particles(self, remap):
         """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
@@ -364,14 +285,14 @@ class Solver:
         self._dx = self._scratch("_dx_buf", (p.n, 2))
         vmax, bad = self.transfer.g2p(self, remap)
         self._vmax_local, self._bad_local = vmax, bad
-        if self.supports is not None:   # (the MUSL re-map above carried their FLIP velocity; the
-            self.supports.hold_particles(self)   # re-mapped velocity is projected in grid_velocity)
+        for after in self._hooks["after_g2p"]:   # held particles
+            after(self)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
         not ask for them: (de, dw, F, vol0, dq). ``dw`` is the spin increment (Jaumann),
         ``dq`` the cosine and sine of the change of the polar angle of F (Green-Naghdi)."""
-        p, cfg = self.particles, self.scene.solver
+        p, cfg = self.particles, self.options
         de = self._scratch("_de", (p.n, 3))
         dw = dq = None
         if self.rotates_stress:
@@ -389,11 +310,11 @@ class Solver:
         self.external_work += K.g2p_kinematics(
             p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq,
             velocity_field, self._dx if move else None, dt,
-            self.loads.gravity, None, None, None, *self._geometry())
+            self.gravity, None, None, None, *self._geometry())
         if self.interpolation == "cpgimp":
             self._stretch_domains(de)
         if move:
-            self._point_load_work()
+            self._work_of_moves()
 
     def _stretch_domains(self, de):
         """cpGIMP: each half-length follows the material's stretch along its axis, l *= 1 + de_ii
@@ -407,15 +328,13 @@ class Solver:
         p = self.particles
         self.external_work += K.g2p_kinematics(
             p["x"], p["m"], p["vol"], None, None, None, None, None, None, 1, self._dx, dt,
-            self.loads.gravity, None, None, None, *self._geometry())
-        self._point_load_work()
+            self.gravity, None, None, None, *self._geometry())
+        self._work_of_moves()
 
-    def _point_load_work(self):
-        """Work of the set forces over this step's moves (the forces of the step's start)."""
-        point = self.loads.point_forces(self.particles, self.t)
-        if point is not None:
-            idx, load_id, load_w, load_vec = point
-            self.external_work += K.point_load_work(idx, self._dx, load_id, load_w, load_vec)
+    def _work_of_moves(self):
+        """Work of the effects' forces over this step's moves (point loads)."""
+        for after in self._hooks["after_move"]:
+            after(self)
 
     def update_stress(self):
         """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
@@ -425,7 +344,7 @@ class Solver:
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         several = len(self.materials) > 1
-        thickness = self.keeps_F and self.scene.formulation == "plane_stress"
+        thickness = self.keeps_F and self.options.plane_stress
         for k, material in enumerate(self.materials):
             if thickness and not material.needs_deformation_gradient:
                 trace_before = self._scratch("_trace_buf", (p.n,))
@@ -441,10 +360,8 @@ class Solver:
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
                                             material.E, material.nu, p["mat"], k if several else -1)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
-        if self.rayleigh is not None:
-            self.rayleigh.update(p, self._de, self._dt_step)
-        for event in self.events:  # what a fading body's stress did not pass to the grid
-            self.removed_energy -= event.released_work(p, self._de)
+        for after in self._hooks["after_stress_update"]:   # viscous stress, fading bodies
+            after(self)
 
     def _rotate(self, t):
         """Rotate the Voigt tensors ``t`` by this step's objective rate (if large rotations)."""
@@ -521,30 +438,15 @@ class Solver:
         self.removed += int(self.decomp.allreduce_sum(int((~keep).sum())))
         self.particles = self.particles.take(keep)
 
-    def remove_body(self, event):
-        """The particles of an event's body leave the run (collective: every rank at the same
-        step). Their kinetic energy, strain energy and plastic work move to ``removed_energy``
-        (the latter two out of the internal work, which they had entered)."""
-        p = self.particles
-        gone = event.leaving(p)
-        part = p.take(gone)
-        kinetic = K.kinetic_energy(part["m"], part["v"])
-        several = len(self.materials) > 1
-        held = sum(K.elastic_energy(part["stress"], part["vol"], m.E, m.nu, part["mat"], k if several else -1)
-                   for k, m in enumerate(self.materials) if not m.needs_deformation_gradient)
-        held += sum(m.strain_energy(part["F"], part["vol0"], part["mat"], k if several else -1)
-                    for k, m in enumerate(self.materials) if m.needs_deformation_gradient)
-        if "plastic_work" in part:
-            held += float(np.sum(part["plastic_work"] * part["vol"]))
-        self.removed_energy += kinetic + held
-        self.internal_work -= held
-        self.particles = p.take(~gone)
-        event.done = True
-        count = int(self.decomp.allreduce_sum(int(gone.sum())))
-        mass = self.decomp.allreduce_sum(float(part["m"].sum()))
-        self.removed_by_events = getattr(self, "removed_by_events", 0) + count
-        if self.decomp.rank == 0:
-            logger.info("t = %.6g s: body %r removed (%d particles, %.6g kg)", self.t, event.name, count, mass)
+    def held_energy(self, part):
+        """The strain energy and the material energy terms (plastic work, ...) that the
+        particles ``part`` (a Particles selection) hold: what leaves the internal work with
+        them (pmpm.physics.events)."""
+        held = self._strain_energy(part)
+        for term in energy_terms():
+            if not term.outside and term.name in part:
+                held += float(np.sum(part[term.name] * part["vol"]))
+        return held
 
     def outside_report(self, limit=5):
         """'id (x, y)' of particles outside the grid, from every rank (rank 0 gets the text)."""
@@ -563,10 +465,10 @@ class Solver:
 
     def rebalance(self):
         """Move slab boundaries by the particle count per column if the imbalance is too big."""
-        par = self.scene.parallel
-        if par.rebalance_threshold is None or self.decomp.size == 1:
+        threshold = self.options.rebalance_threshold
+        if threshold is None or self.decomp.size == 1:
             return False
-        if self.decomp.imbalance(self.particles.n) <= par.rebalance_threshold:
+        if self.decomp.imbalance(self.particles.n) <= threshold:
             return False
         cols = K.cell_columns(self.particles["x"], self.grid.origin, self.grid.inv_h, self.axis)
         weights = np.bincount(cols, minlength=self.grid.nodes[self.axis]).astype(np.float64)
@@ -581,7 +483,7 @@ class Solver:
     # -- one step ---------------------------------------------------------------------------
     def step(self):
         """Advance one time step; raises on instability or particles leaving the grid."""
-        cfg = self.scene.solver
+        cfg = self.options
         if cfg.sort_interval and self.step_count % cfg.sort_interval == 0:
             self.sort_particles()
         dt = self.dt
@@ -606,10 +508,9 @@ class Solver:
         self.migrate(leaving)
         self.t += dt
         self.step_count += 1
-        for event in self.events:
-            if event.due(self.t):
-                self.remove_body(event)
-        if self.step_count % self.scene.parallel.rebalance_interval == 0:
+        for after in self._hooks["after_step"]:   # bodies an event removes
+            after(self)
+        if self.step_count % cfg.rebalance_interval == 0:
             self.rebalance()
         self.dt = self.stable_dt(self.vmax)
         return dt
@@ -647,44 +548,44 @@ class Solver:
 
     # -- reporting ----------------------------------------------------------------------------
     def energies(self, summed=None):
-        """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V), plastic
-        work, internal work (integrated stress power: strain + dissipation, exact for any
-        material), external work, damping work (mass-proportional), viscous damping work (the
-        stiffness part of Rayleigh damping), the energy removed particles carried out
-        (``removed_energy``), and ``total`` = kinetic + internal work + both damping works +
-        removed energy, which equals the external work plus the initial kinetic energy when the
-        run conserves energy. ``summed``: ``local_energies()`` already summed over the ranks
-        (by a reduction shared with other figures), else summed here (collective)."""
+        """Global energies (J): kinetic, recoverable strain (1/2 sigma : C^-1 : sigma V, or the
+        stored energy W(F) of a hyperelastic model), internal work (integrated stress power:
+        strain + dissipation, exact for any material), external work, every registered energy
+        term (pmpm.core.effects: the plastic work, the damping works, the energy removed
+        particles carried out, ...), ``total`` = kinetic + internal work + the terms done
+        outside it, which equals the external work plus the initial energy when the run
+        conserves energy, and ``numerical_loss``. ``summed``: ``local_energies()`` already
+        summed over the ranks (by a reduction shared with other figures), else summed here
+        (collective)."""
         if summed is None:
             summed = self.decomp.allreduce_sum(self.local_energies())
-        ke, se, pw, wi, we, wd, wv, er = summed
-        e0 = getattr(self, "initial_energy", ke + wi + wd + wv + er)   # at construction: this very state
-        return {"kinetic": ke, "strain": se, "plastic_work": pw, "internal_work": wi,
-                "external_work": we, "damping_work": wd, "viscous_damping_work": wv,
-                "removed_energy": er, "total": ke + wi + wd + wv + er,
-                "numerical_loss": numerical_loss(e0, we, ke, se, pw, wd, viscous=wv, removed=er)}
+        ke, se, wi, we = summed[:4]
+        terms = energy_terms()
+        values = dict(zip((t.name for t in terms), summed[4:]))
+        total = ke + wi
+        for t in terms:
+            if t.outside:
+                total += values[t.name]
+        e0 = getattr(self, "initial_energy", total)   # at construction: this very state
+        return {"kinetic": ke, "strain": se, "internal_work": wi, "external_work": we, **values,
+                "total": total, "numerical_loss": numerical_loss(e0, we, ke, se, *values.values())}
 
     def local_energies(self):
-        """This rank's shares of the energies, in the order ``energies`` reads them."""
+        """This rank's shares of the energies, in the order ``energies`` reads them: kinetic,
+        strain, internal work, external work, then the registered energy terms (a material's
+        from its per-particle field integrated over the volume, an effect's from its own
+        accumulator)."""
         p = self.particles
         kinetic = K.kinetic_energy(p["m"], p["v"])
+        terms = [self.effects.energy(t.name) if t.outside else
+                 (float(np.sum(p[t.name] * p["vol"])) if t.name in p else 0.0) for t in energy_terms()]
+        return np.array([kinetic, self._strain_energy(p), self.internal_work, self.external_work, *terms])
+
+    def _strain_energy(self, p):
+        """The stored energy of particles ``p``: hyperelastic models know W(F); the others' is
+        the recoverable 1/2 sigma : C^-1 : sigma."""
         several = len(self.materials) > 1
-        # hyperelastic models know their stored energy W(F); the others' is the recoverable
-        # 1/2 sigma : C^-1 : sigma
-        strain = sum(m.strain_energy(p["F"], p["vol0"], p["mat"], k if several else -1)
-                     if m.needs_deformation_gradient else
-                     K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
-                     for k, m in enumerate(self.materials))
-        plastic = float(np.sum(p["plastic_work"] * p["vol"])) if "plastic_work" in p else 0.0
-        return np.array([kinetic, strain, plastic, self.internal_work, self.external_work, self.damping_work,
-                         self.viscous_damping_work, self.removed_energy])
-
-    @property
-    def viscous_damping_work(self):
-        """This rank's share of the energy the viscous stress of Rayleigh damping dissipated."""
-        return self.rayleigh.work if self.rayleigh is not None else 0.0
-
-    @viscous_damping_work.setter
-    def viscous_damping_work(self, value):
-        if self.rayleigh is not None:
-            self.rayleigh.work = value
+        return sum(m.strain_energy(p["F"], p["vol0"], p["mat"], k if several else -1)
+                   if m.needs_deformation_gradient else
+                   K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], k if several else -1)
+                   for k, m in enumerate(self.materials))

@@ -24,11 +24,23 @@ __all__ = ["Transfer", "FLIP", "APIC", "XPIC", "make_transfer", "xpic_coefficien
 
 
 class Transfer:
-    """Base of the transfers: ``p2g(solver, momentum, forces)`` and ``g2p(solver, remap)``."""
+    """Base of the transfers: ``p2g(solver, momentum, forces)`` and ``g2p(solver, remap)``;
+    ``from_config`` takes the transfer's own options from the scene's ``[solver]`` table and
+    ``describe`` gives its line of the run header (none for the paper's FLIP)."""
 
     name = None
     #: per-particle fields the transfer keeps: name -> trailing shape
     fields = {}
+    #: the PIC share of the particle velocity update (FLIP's option; 0 for the others)
+    pic_blend = 0.0
+
+    @classmethod
+    def from_config(cls, cfg):
+        """The transfer with its options from ``cfg`` (the scene's ``[solver]`` settings)."""
+        return cls()
+
+    def describe(self):
+        return []
 
     def p2g(self, s, momentum, forces):
         raise NotImplementedError
@@ -42,14 +54,21 @@ class FLIP(Transfer):
 
     name = "flip"
 
+    def __init__(self, pic_blend=0.0):
+        self.pic_blend = pic_blend
+
+    @classmethod
+    def from_config(cls, cfg):
+        return cls(pic_blend=cfg.pic_blend)
+
     def p2g(self, s, momentum, forces):
         p = s.particles
         K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], s.force_stress() if forces else None,
-              s.loads.gravity if forces else None, None, None, None, *s._geometry())
+              s.gravity if forces else None, None, None, None, *s._geometry())
 
     def g2p(self, s, remap):
         p = s.particles
-        return K.g2p_velocity(p["x"], p["m"], p["v"], s.scene.solver.pic_blend, *s._geometry(),
+        return K.g2p_velocity(p["x"], p["m"], p["v"], self.pic_blend, *s._geometry(),
                               remap, s._dx, s._dt_step)
 
 
@@ -59,12 +78,15 @@ class APIC(Transfer):
     name = "apic"
     fields = {"C": (4,)}
 
+    def describe(self):
+        return ["APIC transfer (affine velocity C per particle)"]
+
     def p2g(self, s, momentum, forces):
         p = s.particles
         if not momentum:   # USF's force pass: no velocity moves
             return FLIP.p2g(self, s, False, forces)
         p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], s.force_stress() if forces else None,
-                   s.loads.gravity if forces else None, None, None, None, *s._geometry())
+                   s.gravity if forces else None, None, None, None, *s._geometry())
 
     def g2p(self, s, remap):
         p = s.particles
@@ -90,6 +112,13 @@ class XPIC(Transfer):
     def __init__(self, order=2):
         self.order = order
         self.coefficients = xpic_coefficients(order)
+
+    @classmethod
+    def from_config(cls, cfg):
+        return cls(order=cfg.xpic_order)
+
+    def describe(self):
+        return [f"XPIC({self.order}) transfer ({self.order - 1} extra grid-particle-grid passes per step)"]
 
     def p2g(self, s, momentum, forces):
         FLIP.p2g(self, s, momentum, forces)
@@ -126,8 +155,11 @@ class XPIC(Transfer):
         return K.g2p_velocity(p["x"], p["m"], p["v"], 0.0, *s._geometry(), remap, s._dx, s._dt_step)
 
 
-def make_transfer(name, **options):
-    """The transfer registered under ``name`` (``flip``, ``apic``, ``xpic``); ``options``: the
-    XPIC order (``order``)."""
+def make_transfer(name, cfg=None, **options):
+    """The transfer registered under ``name`` (``flip``, ``apic``, ``xpic``), with its options
+    from ``cfg`` (the scene's ``[solver]`` settings: ``Transfer.from_config``) or ``options``
+    (e.g. the XPIC ``order``)."""
     cls = lookup(Transfer, name)
+    if cfg is not None:
+        return cls.from_config(cfg)
     return cls(**options) if options else cls()

@@ -16,9 +16,10 @@ import logging
 
 import numpy as np
 
+from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
 
-__all__ = ["apply_boundary_masks", "check_boundaries", "check_boxes_hold", "select_nodes", "COMPONENTS", "FACES"]
+__all__ = ["BoxBoundaries", "apply_boundary_masks", "check_boundaries", "check_boxes_hold", "select_nodes", "COMPONENTS", "FACES"]
 logger = logging.getLogger(__name__)
 
 #: velocity components each boundary type prescribes
@@ -96,3 +97,24 @@ def apply_boundary_masks(window, boundaries):
         for d in _COMPONENTS[bc.type]:
             window.bc_mask[sel, d] = 1
             window.bc_vel[sel, d] = bc.velocity[d]
+
+
+class BoxBoundaries(Effect):
+    """The scene's ``[[boundary]]`` boxes as the grid window's masks (effect ``boundary``):
+    checked against the grid and the particles at construction, marked on every new window."""
+
+    name = "boundary"
+
+    def __init__(self, boundaries):
+        self.boundaries = boundaries
+
+    @classmethod
+    def create(cls, scene, setup):
+        if not scene.boundaries:
+            return None
+        check_boundaries(scene.boundaries, setup.grid)
+        check_boxes_hold(scene.boundaries, setup.grid, setup.points["x"], setup.reach)
+        return cls(scene.boundaries)
+
+    def on_window(self, s):
+        apply_boundary_masks(s.window, self.boundaries)

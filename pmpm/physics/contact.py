@@ -71,22 +71,28 @@ class ContactSolver(Solver):
 
     Parameters
     ----------
-    scene : pmpm.scene.config.Scene
-        With ``scene.contact`` set.
-    comm : mpi4py communicator, optional
+    *parts : the parts of pmpm.core.solver.Solver (pmpm.build.build_solver)
+    friction : float
+        Coulomb friction coefficient (``contact.friction``).
+    slot_of, n_slots : the velocity field of each body and their number (``contact_slots``)
+    **kwargs : the options of pmpm.core.solver.Solver
     """
 
-    def __init__(self, scene, comm=None):
-        if scene.contact is None:
-            raise ValueError("ContactSolver needs a scene with a [contact] section")
-        self.friction = float(scene.contact.friction)
-        self.slot_of, self.n_slots = contact_slots(scene)
+    def __init__(self, *parts, friction, slot_of, n_slots, **kwargs):
+        self.friction = float(friction)
+        self.slot_of, self.n_slots = slot_of, n_slots
         self.corrections = 0  # (node, slot) corrections on this rank, ghosts included
-        super().__init__(scene, comm)
+        super().__init__(*parts, **kwargs)
 
     def describe(self):
-        """One line for the log's list of effects."""
-        return f"contact with friction {self.friction:g} ({self.n_slots} velocity fields)"
+        """The run header's lines of the physics this solver adds."""
+        return [f"contact with friction {self.friction:g} ({self.n_slots} velocity fields)"]
+
+    def _load_args(self):
+        """(gravity, load_id, load_w, load_vec) of the loads effect for the body kernels, which
+        take every load in their particle loop (None where absent)."""
+        loads = self.effect("loads")
+        return loads.kernel_args(self.particles, self.t) if loads is not None else (None,) * 4
 
     # -- the body window ---------------------------------------------------------------------
     def _build_window(self):
@@ -132,7 +138,7 @@ class ContactSolver(Solver):
 
     def particles_to_grid(self, momentum, forces):
         p = self.particles
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t) if forces else (None,) * 4
+        gravity, load_id, load_w, load_vec = self._load_args() if forces else (None,) * 4
         KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
                       self.force_stress() if forces else None, p["body"], self.slot_of,
                       gravity, load_id, load_w, load_vec, *self._body_geometry())
@@ -158,14 +164,14 @@ class ContactSolver(Solver):
         p = self.particles
         self._dx = self._scratch("_dx_buf", (p.n, 2))
         vmax, bad = KC.g2p_velocity_bodies(p["x"], p["m"], p["v"], p["body"], self.slot_of,
-                                           self.scene.solver.pic_blend, *self._body_geometry(),
+                                           self.transfer.pic_blend, *self._body_geometry(),
                                            remap, self._dx, self._dt_step)
         self._vmax_local, self._bad_local = vmax, bad
 
     def update_strain(self, dt, velocity_field, move=True):
         p = self.particles
         de, dw, F, vol0, dq = self._kinematics_outputs()
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        gravity, load_id, load_w, load_vec = self._load_args()
         self.external_work += KC.g2p_kinematics_bodies(
             p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq, p["body"], self.slot_of,
             _field(velocity_field), self._dx if move else None, dt,
@@ -173,7 +179,7 @@ class ContactSolver(Solver):
 
     def move_particles(self, dt):
         p = self.particles
-        gravity, load_id, load_w, load_vec = self.loads.kernel_args(p, self.t)
+        gravity, load_id, load_w, load_vec = self._load_args()
         self.external_work += KC.g2p_kinematics_bodies(
             p["x"], p["m"], p["vol"], None, None, None, None, None, None, p["body"], self.slot_of,
             KC.MOM, self._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())

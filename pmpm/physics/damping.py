@@ -36,9 +36,17 @@ import math
 
 import numpy as np
 
+from pmpm.core.effects import Effect, register_energy
 from pmpm.core.kernels.damping import add_viscous, viscous_stress
 
-__all__ = ["RayleighDamping", "rayleigh_coefficients", "ratio_at", "undamped_cfl_limit"]
+__all__ = ["MassDamping", "RayleighDamping", "rayleigh_coefficients", "ratio_at", "undamped_cfl_limit"]
+
+#: the energy terms of damping (J), dissipated
+DAMPING_WORK = register_energy(
+    "damping_work", "work done by mass-proportional damping (the mass part of Rayleigh damping), dissipated")
+VISCOUS_DAMPING_WORK = register_energy(
+    "viscous_damping_work", "work done by the viscous stress of Rayleigh damping (its stiffness part), "
+                            "dissipated")
 
 #: the undamped CFL limits of docs/accuracy.md (bar, MUSL, point interpolation), about 3% lower
 UNDAMPED_CFL_LIMIT = {"cubic": 2.5, "quadratic": 2.25, "linear": 1.65}
@@ -69,8 +77,33 @@ def ratio_at(a0, a1, omega):
     return a0 / (2 * omega) + a1 * omega / 2
 
 
-class RayleighDamping:
-    """The stiffness part of Rayleigh damping on the particles (the mass part is the grid's).
+class MassDamping(Effect):
+    """Mass-proportional damping ``[loads] damping = alpha`` (effect ``damping``): the nodal
+    force -alpha m v of the grid-update kernel; its work is ``damping_work``."""
+
+    name = "damping"
+    energy_terms = (DAMPING_WORK,)
+
+    @classmethod
+    def create(cls, scene, setup):
+        alpha = scene.loads.damping
+        return cls(alpha) if alpha and not scene.loads.rayleigh else None
+
+    def __init__(self, alpha):
+        self.nodal_damping = alpha
+        self.damping_work = 0.0   # this rank's share (owned nodes), J
+
+    def after_grid_update(self, s, damped_work):
+        self.damping_work += damped_work
+
+    def describe(self):
+        return [f"mass-proportional damping ({self.nodal_damping:g} 1/s)"]
+
+
+class RayleighDamping(Effect):
+    """Rayleigh damping by ratio (effect ``rayleigh_damping``): its mass part is the nodal
+    mass-proportional damping (``damping_work``), its stiffness part the viscous stress on the
+    particles (``viscous_damping_work``) and a shorter stable step.
 
     Parameters
     ----------
@@ -83,12 +116,33 @@ class RayleighDamping:
     #: checkpointed with the particle like any field
     FIELD = "viscous_stress"
 
-    def __init__(self, config, materials):
+    name = "rayleigh_damping"
+    energy_terms = (DAMPING_WORK, VISCOUS_DAMPING_WORK)
+
+    @classmethod
+    def create(cls, scene, setup):
+        config = scene.loads.rayleigh
+        return cls(config, setup.materials, undamped_cfl_limit(setup.shape_function, setup.interpolation)) \
+            if config else None
+
+    def __init__(self, config, materials, undamped_limit=1.0):
         self.ratio = config["ratio"]
         self.periods = tuple(config["periods"])
         self.a0, self.a1 = rayleigh_coefficients(self.ratio, self.periods)
         self.materials = materials
-        self.work = 0.0  # this rank's share of the stiffness part's dissipation (J)
+        self.undamped_limit = undamped_limit
+        self.nodal_damping = self.a0 or None   # None compiles the grid's damping out
+        self.damping_work = 0.0          # this rank's share of the mass part's dissipation (J)
+        self.viscous_damping_work = 0.0  # this rank's share of the stiffness part's (J)
+
+    @property
+    def work(self):
+        """This rank's share of the stiffness part's dissipation (J)."""
+        return self.viscous_damping_work
+
+    @work.setter
+    def work(self, value):
+        self.viscous_damping_work = value
 
     @property
     def stiffness(self):
@@ -101,7 +155,7 @@ class RayleighDamping:
         xi = self.a1 * wave_speed / (undamped_limit * h)
         return min(1.0, undamped_limit * (math.sqrt(1 + xi * xi) - xi))
 
-    def add_fields(self, particles):
+    def add_fields(self, particles, setup=None):
         """Give the particles their viscous stress (zero at the start)."""
         particles.add_field(self.FIELD, (3,))
 
@@ -119,8 +173,26 @@ class RayleighDamping:
             self.work += viscous_stress(p[self.FIELD], de, p["vol"], dt, self.a1, m.E, m.nu,
                                         m.plane_strain, p["mat"], k if several else -1)
 
+    # -- effect hooks
+    def limit_dt(self, dt, speed, s):
+        """The viscous stress shortens the stable step (module doc)."""
+        return dt * self.stable_step_factor(speed, s.grid.h, self.undamped_limit)
+
+    def edits_force_stress(self, t):
+        return True
+
+    def add_force_stress(self, s, out):
+        """The viscous stress joins the stress of the internal force."""
+        self.force_stress(out, s.particles[self.FIELD], out)
+
+    def after_grid_update(self, s, damped_work):
+        self.damping_work += damped_work
+
+    def after_stress_update(self, s):
+        self.update(s.particles, s._de, s._dt_step)
+
     def describe(self):
         """The start-up log's effect line."""
         T1, T2 = self.periods
-        return (f"Rayleigh damping {self.ratio:g} of critical at T = {T1:g} s and {T2:g} s "
-                f"(a0 = {self.a0:.4g} 1/s on the nodes, a1 = {self.a1:.4g} s viscous stress)")
+        return [f"Rayleigh damping {self.ratio:g} of critical at T = {T1:g} s and {T2:g} s "
+                f"(a0 = {self.a0:.4g} 1/s on the nodes, a1 = {self.a1:.4g} s viscous stress)"]

@@ -26,8 +26,16 @@ import logging
 
 import numpy as np
 
-__all__ = ["RemoveBody", "make_events"]
+from pmpm.core import kernels as K
+from pmpm.core.effects import Effect, register_energy
+
+__all__ = ["Events", "RemoveBody", "make_events"]
 logger = logging.getLogger(__name__)
+
+#: the energy term of events (J)
+REMOVED_ENERGY = register_energy(
+    "removed_energy", "energy carried out of the run by particles a scene event removed (their kinetic "
+                      "energy at removal, less the internal work their fading stress did not transmit)")
 
 
 class RemoveBody:
@@ -101,3 +109,73 @@ def make_events(events, bodies):
     """The scene's events as objects (an empty list without ``[[events]]``)."""
     names = [b.name for b in bodies]
     return [RemoveBody(e, names.index(e["body"])) for e in events]
+
+
+class Events(Effect):
+    """The scene's ``[[events]]`` (effect ``events``): a fading body's rows of the force stress
+    scaled, the work it held back and the energy its particles carry out as ``removed_energy``
+    (module doc), the body's particles removed at the end of its event."""
+
+    name = "events"
+    energy_terms = (REMOVED_ENERGY,)
+
+    @classmethod
+    def create(cls, scene, setup):
+        return cls(make_events(scene.events, scene.bodies)) if scene.events else None
+
+    def __init__(self, events):
+        self.events = events
+        self.removed_energy = 0.0   # this rank's share, J
+        self.removed_by_events = 0  # particles removed (global count)
+
+    def __iter__(self):
+        return iter(self.events)
+
+    def __getitem__(self, k):
+        return self.events[k]
+
+    def __len__(self):
+        return len(self.events)
+
+    def edits_force_stress(self, t):
+        return any(e.active(t) for e in self.events)
+
+    def add_force_stress(self, s, out):
+        for event in self.events:
+            if event.active(s.t):
+                event.scale_force_stress(s.particles, out, s.t)
+
+    def after_stress_update(self, s):
+        for event in self.events:  # what a fading body's stress did not pass to the grid
+            self.removed_energy -= event.released_work(s.particles, s._de)
+
+    def after_step(self, s):
+        for event in self.events:
+            if event.due(s.t):
+                self.remove_body(s, event)
+
+    def remove_body(self, s, event):
+        """The particles of an event's body leave the run (collective: every rank at the same
+        step). Their kinetic energy, strain energy and plastic work move to ``removed_energy``
+        (the latter two out of the internal work, which they had entered)."""
+        p = s.particles
+        gone = event.leaving(p)
+        part = p.take(gone)
+        kinetic = K.kinetic_energy(part["m"], part["v"])
+        held = s.held_energy(part)
+        self.removed_energy += kinetic + held
+        s.internal_work -= held
+        s.particles = p.take(~gone)
+        event.done = True
+        count = int(s.decomp.allreduce_sum(int(gone.sum())))
+        mass = s.decomp.allreduce_sum(float(part["m"].sum()))
+        self.removed_by_events += count
+        if s.decomp.rank == 0:
+            logger.info("t = %.6g s: body %r removed (%d particles, %.6g kg)", s.t, event.name, count, mass)
+
+    def restore(self, s, attrs):
+        for event in self.events:  # a body removed before the checkpoint is not in it
+            event.done = s.t >= event.time + event.duration * (1 - 1e-12)
+
+    def describe(self):
+        return [e.describe() for e in self.events]

@@ -12,7 +12,9 @@ import re
 
 import numpy as np
 
+from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
+from pmpm.physics.boundary import select_nodes
 
 __all__ = ["GroundMotion", "read_record"]
 logger = logging.getLogger(__name__)
@@ -104,7 +106,7 @@ def read_record(path, fmt="auto"):
     return t, a
 
 
-class GroundMotion:
+class GroundMotion(Effect):
     """The record, its velocity, and the base nodes it drives.
 
     Parameters
@@ -115,6 +117,13 @@ class GroundMotion:
     scene_dir : str
         Relative record paths are relative to the scene file.
     """
+
+    name = "ground_motion"
+
+    @classmethod
+    def create(cls, scene, setup):
+        ground = scene.loads.ground_motion
+        return cls(ground, scene.boundaries, setup.scene_dir) if ground else None
 
     def __init__(self, config, boundaries, scene_dir):
         path = config["file"]
@@ -143,8 +152,8 @@ class GroundMotion:
         self.nodes = None
 
     def describe(self):
-        return (f"ground motion along {'xy'[self.direction]}: {len(self.t)} samples over "
-                f"{self.t[-1]:g} s, peak {np.abs(self.a).max():.3g} m/s^2")
+        return [f"ground motion along {'xy'[self.direction]}: {len(self.t)} samples over "
+                f"{self.t[-1]:g} s, peak {np.abs(self.a).max():.3g} m/s^2"]
 
     def velocity(self, time):
         """Ground velocity at ``time`` (exact for piecewise-linear acceleration)."""
@@ -159,7 +168,6 @@ class GroundMotion:
 
     def bind(self, window):
         """Find the window's nodes of the driven boundaries (after every window rebuild)."""
-        from pmpm.physics.boundary import select_nodes
         sel = np.zeros(window.shape, dtype=bool)
         for bc in self.boundaries:
             sel |= select_nodes(window, bc)
@@ -168,3 +176,10 @@ class GroundMotion:
     def apply(self, window, time):
         """Set the driven nodes' prescribed velocity to the ground velocity at ``time``."""
         window.bc_vel[self.nodes[0], self.nodes[1], self.direction] = self.velocity(time)
+
+    # -- effect hooks
+    def on_window(self, s):
+        self.bind(s.window)
+
+    def before_grid_update(self, s, t_next):
+        self.apply(s.window, t_next)

@@ -10,6 +10,8 @@ import logging
 
 import numpy as np
 
+from pmpm.core import kernels as K
+from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
 from pmpm.physics.timefunctions import evaluate
 
@@ -21,17 +23,26 @@ def _in_box(x, lower, upper):
     return np.all((x >= np.asarray(lower)) & (x <= np.asarray(upper)), axis=1)
 
 
-class Loads:
-    """Gravity vector and force sets of a scene.
+class Loads(Effect):
+    """Gravity vector and force sets of a scene (effect ``loads``: gravity is the kernels'
+    body acceleration, the force sets are scattered after the force pass).
 
     Parameters
     ----------
     config : LoadsConfig
     """
 
+    name = "loads"
+
+    @classmethod
+    def create(cls, scene, setup):
+        loads = scene.loads
+        return cls(loads) if loads.gravity is not None or loads.forces else None
+
     def __init__(self, config):
         self.config = config
         self.gravity = None if config.gravity is None else np.asarray(config.gravity, dtype=np.float64)
+        self.body_acceleration = self.gravity
         self.forces = config.forces
         self._vec = np.zeros((len(self.forces), 2))
         self._idx, self._idx_of = None, None
@@ -48,6 +59,9 @@ class Loads:
         for f in self.forces:
             out.append(f"force {f.name!r}: {f.force} N, {f.time_function['type']}")
         return out
+
+    def add_fields(self, particles, setup):
+        self.assign(particles.fields, setup.decomp.allreduce_sum)
 
     def assign(self, fields, allreduce_sum):
         """Add ``load_id``/``load_w`` to the particle ``fields`` (all ranks call it)."""
@@ -93,3 +107,18 @@ class Loads:
             self._idx = np.flatnonzero(load_id >= 0).astype(np.int64)
             self._idx_of = load_id
         return self._idx, load_id, particles["load_w"], self.vectors(t)
+
+    # -- effect hooks: the force sets (gravity is in the kernels' particle loops)
+    def scatter_forces(self, s):
+        """Scatter the force sets' shares onto the grid (after the force pass)."""
+        point = self.point_forces(s.particles, s.t)
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            K.scatter_point_loads(idx, s.particles["x"], load_id, load_w, load_vec, *s._geometry())
+
+    def after_move(self, s):
+        """Work of the set forces over this step's moves (the forces of the step's start)."""
+        point = self.point_forces(s.particles, s.t)
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            s.external_work += K.point_load_work(idx, s._dx, load_id, load_w, load_vec)

@@ -28,7 +28,9 @@ import math
 
 import numpy as np
 
+from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
+from pmpm.physics.boundary import select_nodes
 
 __all__ = ["Pushover", "PUSHED_COMPONENT"]
 
@@ -36,7 +38,7 @@ __all__ = ["Pushover", "PUSHED_COMPONENT"]
 PUSHED_COMPONENT = {"roller_y": 0, "roller_x": 1}
 
 
-class Pushover:
+class Pushover(Effect):
     """The pushed boundary's nodes and their velocity over time.
 
     Parameters
@@ -45,6 +47,12 @@ class Pushover:
         ``Scene.pushover`` (pmpm.scene.analyses).
     boundaries : sequence of BoundaryConfig
     """
+
+    name = "pushover"
+
+    @classmethod
+    def create(cls, scene, setup):
+        return cls(scene.pushover, scene.boundaries) if scene.pushover else None
 
     def __init__(self, config, boundaries):
         self.config = config
@@ -83,14 +91,20 @@ class Pushover:
 
     def bind(self, window):
         """Find the window's pushed nodes (after every window rebuild)."""
-        from pmpm.physics.boundary import select_nodes
         self.nodes = np.nonzero(select_nodes(window, self.boundary))
 
     def apply(self, window, t):
         """Prescribe the pushed component of the nodes at the velocity of time ``t``."""
         window.bc_vel[self.nodes[0], self.nodes[1], self.component] = self.velocity(t)
 
+    # -- effect hooks
+    def on_window(self, s):
+        self.bind(s.window)
+
+    def before_grid_update(self, s, t_next):
+        self.apply(s.window, t_next)
+
     def describe(self):
-        return (f"pushover: boundary {self.boundary.name!r} pushed {self.displacement:g} m along "
+        return [f"pushover: boundary {self.boundary.name!r} pushed {self.displacement:g} m along "
                 f"{'xy'[self.component]} over {self.duration:g} s (ramps {self.ramp:g} s, "
-                f"{self.v0:.4g} m/s), drift of {self.config['control']!r}")
+                f"{self.v0:.4g} m/s), drift of {self.config['control']!r}"]

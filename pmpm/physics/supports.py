@@ -43,6 +43,8 @@ import logging
 
 import numpy as np
 
+from pmpm.core.effects import Effect
+from pmpm.core.kernels import MOM
 from pmpm.core.kernels.support import row_width, support_gather, support_rows, support_solve
 from pmpm.errors import ConfigError
 from pmpm.physics.boundary import COMPONENTS, FACES
@@ -71,7 +73,7 @@ def face_layer(bc, bodies, points):
     return idx[np.abs(coord - extreme) <= 0.5 * spacing]
 
 
-class HeldFaces:
+class HeldFaces(Effect):
     """The supports attached to bodies' faces of a scene, as velocity constraints.
 
     Parameters
@@ -80,6 +82,18 @@ class HeldFaces:
     points : dict of the scene's global points (``x``, ``vol``, ``body``; a point's index is its id)
     grid : pmpm.core.grid.Grid
     """
+
+    name = "supports"
+
+    @classmethod
+    def create(cls, scene, setup):
+        if not any(b.body is not None for b in scene.boundaries):
+            return None
+        held = cls(scene.boundaries, scene.bodies, setup.points, setup.grid)
+        if scene.contact is not None:
+            raise ConfigError(f"boundary[{held.index[0]}]", "a boundary attached to a body does not work with "
+                                                            "[contact] (give it a box)")
+        return held
 
     def __init__(self, boundaries, bodies, points, grid):
         self.grid = grid
@@ -131,6 +145,21 @@ class HeldFaces:
         if len(self.ids):
             held = self.ids[pos] == particles["id"]
             particles["support"][held] = self.which[pos[held]]
+
+    def add_fields(self, particles, setup=None):
+        self.mark(particles)
+
+    # -- effect hooks: the grid's velocities after the update and the re-map, the particles'
+    def after_grid_update(self, s, damped_work):
+        self.project(s, MOM, impulse=True)
+
+    def after_grid_velocity(self, s, field):
+        self.project(s, field)
+
+    def after_g2p(self, s):
+        # (the MUSL re-map carried their FLIP velocity; the re-mapped velocity is projected in
+        # after_grid_velocity)
+        self.hold_particles(s)
 
     # -- each step ----------------------------------------------------------------------------
     def _local_rows(self, solver):
@@ -184,7 +213,7 @@ class HeldFaces:
         k = gi if axis == 0 else gj
         mine = (k >= lo) & (k < hi)
         solver.external_work += float(np.sum(J[mine].sum(axis=2) * v_new[mine]))   # J . v_new
-        reactions = solver.reactions
+        reactions = solver.effect("reactions")
         if reactions is None:
             return
         g = self.grid
@@ -213,7 +242,7 @@ class HeldFaces:
         target = np.where(held, self.vel[np.maximum(sup, 0), [0, 1]], p["v"][idx])
         change = p["m"][idx, None] * (target - p["v"][idx])
         p["v"][idx] = target
-        reactions = solver.reactions
+        reactions = solver.effect("reactions")
         if reactions is None:
             return
         x = p["x"][idx]

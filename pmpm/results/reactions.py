@@ -24,6 +24,7 @@ import logging
 
 import numpy as np
 
+from pmpm.core.effects import Effect
 from pmpm.physics.boundary import COMPONENTS, select_nodes
 
 __all__ = ["Reactions", "node_centroid"]
@@ -46,7 +47,7 @@ def node_centroid(bc, grid, centroids=None):
     return np.array([x[ix].mean(), y[jy].mean()])
 
 
-class Reactions:
+class Reactions(Effect):
     """Reaction bookkeeping of the boundaries that ask for it.
 
     Parameters
@@ -58,8 +59,18 @@ class Reactions:
         The body-attached boundaries' held particles' centroids (``HeldFaces.centroids``).
     """
 
+    name = "reactions"
+
+    @classmethod
+    def create(cls, scene, setup):
+        if not any(b.reaction for b in scene.boundaries):
+            return None
+        supports = setup.effects.get("supports")
+        return cls(scene.boundaries, setup.grid, supports.centroids if supports is not None else None)
+
     def __init__(self, boundaries, grid, centroids=None):
         self.grid = grid
+        self.all_boundaries = boundaries
         self.index = [k for k, b in enumerate(boundaries) if b.reaction]
         self.boundaries = [boundaries[k] for k in self.index]
         self.names = [b.name for b in self.boundaries]
@@ -81,6 +92,13 @@ class Reactions:
 
     def kernel_arg(self):
         """The ``reaction`` argument of the grid-update kernel."""
+        return self._arg
+
+    # -- effect hooks
+    def on_window(self, s):
+        self.bind(s.window, self.all_boundaries)
+
+    def grid_reaction(self):
         return self._arg
 
     def take(self, t, allreduce_sum, summed=None):

@@ -23,13 +23,15 @@ class StructuralRecorder:
     Parameters
     ----------
     solver : Solver
-        Its ``sections`` (list of SectionCut) and ``reactions`` (Reactions or None).
+        Its effects ``sections`` (pmpm.results.sections.SectionCuts) and ``reactions``
+        (pmpm.results.reactions.Reactions), either or both.
     """
 
     def __init__(self, solver):
         self.solver = solver
-        self.cuts = solver.sections
-        self.reactions = solver.reactions
+        sections = solver.effect("sections")
+        self.cuts = sections.cuts if sections is not None else []
+        self.reactions = solver.effect("reactions")
         self.reaction_names = self.reactions.names if self.reactions is not None else []
         self._phi, self._phi_of = None, None
         # the cuts' band particles by id (all ranks), found once: _band_table

@@ -36,10 +36,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
 from pmpm.results.hinges import cut_properties
 
-__all__ = ["SectionCut", "make_cuts", "particle_spacing", "section_properties"]
+__all__ = ["SectionCut", "SectionCuts", "make_cuts", "particle_spacing", "section_properties"]
 logger = logging.getLogger(__name__)
 
 #: default band width in cells: two cells average out the ringing of period 2h that cubic
@@ -186,3 +187,23 @@ def _check_band_inside(cut, points, phi):
         raise ConfigError(cut.key, f"its band (width {cut.width:g} m) leaves the member: move the "
                                    "cut at least half a band away from the member's end")
 
+
+
+class SectionCuts(Effect):
+    """The scene's section cuts (effect ``sections``, ``[[output.section]]``): found and checked
+    at construction on the scene's particles; the run's recorder samples them (no step hook)."""
+
+    name = "sections"
+
+    @classmethod
+    def create(cls, scene, setup):
+        return cls(make_cuts(scene, setup.grid, setup.points)) if scene.output.sections else None
+
+    def __init__(self, cuts):
+        self.cuts = cuts
+
+    def __iter__(self):
+        return iter(self.cuts)
+
+    def __len__(self):
+        return len(self.cuts)

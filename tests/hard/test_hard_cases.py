@@ -58,9 +58,9 @@ def test_runs_to_its_end_time_with_finite_fields_and_every_particle(name):
     rec = record(name)
     s = rec.solver
     assert rec.error is None, f"{name}: stopped at t = {s.t:.6g} s: {rec.error}"
-    end = s.scene.solver.end_time
+    end = rec.scene.solver.end_time
     # to its end time, or to its [[stop]] (frame_collapse: the drift criterion)
-    assert abs(s.t - end) <= 1e-9 * end or (s.scene.stop and rec.stopped is not None), f"{name}: t = {s.t}"
+    assert abs(s.t - end) <= 1e-9 * end or (rec.scene.stop and rec.stopped is not None), f"{name}: t = {s.t}"
     for field, values in s.particles.fields.items():
         if np.issubdtype(values.dtype, np.floating):
             assert np.isfinite(values).all(), f"{name}: non-finite {field}"
@@ -163,7 +163,7 @@ def test_impact_closes_at_a_third_of_the_wave_speed_and_the_disks_bounce_apart()
     rec = record("impact")
     s = rec.solver
     c = wave_speed(s)  # plane strain dilatational speed, the one the CFL rule uses
-    v = [b.velocity[0] for b in s.scene.bodies]
+    v = [b.velocity[0] for b in rec.scene.bodies]
     assert abs((v[0] - v[1]) - c / 3) <= 1e-5 * c  # the scene's speeds are rounded to 6 digits
     kinetic = rec.energy[:, 0]
     # the impact stores most of the kinetic energy as strain (measured: down to 6%)...
@@ -201,14 +201,14 @@ def test_travelling_block_crosses_many_cells_without_pumping_its_vibration():
 
 def _initial_body_frame_kinetic(scene):
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
-    return body_frame_energy(Solver(scene, MPI.COMM_SELF))
+    from pmpm.build import build_solver
+    return body_frame_energy(build_solver(scene, MPI.COMM_SELF))
 
 
 def test_sparse_free_surface_uses_nodes_lighter_than_a_millionth_of_a_particle():
     rec = record("sparse_free_surface")
     s = rec.solver
-    assert all(b.particles_per_cell == 1 for b in s.scene.bodies)
+    assert all(b.particles_per_cell == 1 for b in rec.scene.bodies)
     # nodes down to the mass cutoff (1e-8 of the heaviest particle) take part in the step; the
     # scene must really produce them (measured: 1.0e-8)
     assert rec.probes[:, 1].min() < 1e-6
@@ -240,7 +240,7 @@ def test_sparse_free_surface_flies_with_its_momentum_and_its_centre_of_mass_on_a
 def test_thin_member_is_one_cell_deep_and_bends_as_a_beam():
     rec = record("thin_member")
     s = rec.solver
-    scene = s.scene
+    scene = rec.scene
     body = scene.bodies[0].geometry
     depth = body["upper"][1] - body["lower"][1]
     length = body["upper"][0] - body["lower"][0]
@@ -275,7 +275,7 @@ def test_frame_is_loaded_near_its_sway_collapse_load_and_yields():
     from frame_beam_model import E_STEEL, SIGMA_Y, sway_collapse_load
     rec = record("frame_near_collapse")
     s = rec.solver
-    applied = s.scene.loads.forces[0].force[0]
+    applied = rec.scene.loads.forces[0].force[0]
     assert abs(applied / sway_collapse_load() - 0.9) < 1e-6
     # a step load near collapse takes the frame far past first yield (measured: 27 times the
     # yield strain; an elastic run would not reach it at all)
@@ -296,7 +296,7 @@ def test_frame_is_loaded_past_its_sway_collapse_load_and_stops_when_its_drift_pa
     assert case.solver.large_rotations and case.solver.end_time == 1.0
     rec = record("frame_collapse")
     s = rec.solver
-    applied = s.scene.loads.forces[0].force[0]
+    applied = rec.scene.loads.forces[0].force[0]
     # the scene gives the load to 1e-2 N of 1.26e6 N
     assert abs(applied / sway_collapse_load() - 1.2) < 1e-6
     # the stop is the issue's: the loaded joint's drift above 10% of the height (to 1e-12 m)
@@ -315,6 +315,6 @@ def test_frame_is_loaded_past_its_sway_collapse_load_and_stops_when_its_drift_pa
 def test_high_cfl_runs_at_cfl_0_9():
     rec = record("high_cfl")
     s = rec.solver
-    assert s.scene.solver.cfl == 0.9 and s.scene.solver.time_step is None
+    assert rec.scene.solver.cfl == 0.9 and rec.scene.solver.time_step is None
     # the steps taken are 0.9 h / (c + max|v|): within 2% of 0.9 h / c for this slow block
     assert rec.dt.max() >= 0.88 * s.grid.h / wave_speed(s)

@@ -47,8 +47,9 @@ def _stable_step_and_onset(variant):
     divergence is evident in a serial run: the kinetic energy (which, unlike the internal work,
     cannot go negative) above twice the energy supplied."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
-    s = Solver(load(CASE, variant), MPI.COMM_SELF)
+    from pmpm.build import build_solver
+    scene = load(CASE, variant)
+    s = build_solver(scene, MPI.COMM_SELF)
     stable = s.grid.h / (wave_speed(s) + s.vmax)
     onset = None
     try:
@@ -59,7 +60,7 @@ def _stable_step_and_onset(variant):
                 onset = s.step_count
     except Exception:  # the serial run stopped: it diverged at this step at the latest
         onset = s.step_count + 1
-    return stable, s.scene.solver.time_step, onset
+    return stable, scene.solver.time_step, onset
 
 
 @pytest.mark.parametrize("variant", ["x3", "x10"])

@@ -161,11 +161,11 @@ def test_the_stop_sample_follows_its_particle_when_rows_move(tmp_path):
     values of the row found by searching the id afresh."""
     from mpi4py import MPI
 
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.scene.config import load_scene
     from pmpm.stop import make_stop_check
     scene = load_scene(str(_write(tmp_path)))[0]
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     check = make_stop_check(scene, s)
 
     def searched():

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from pmpm.build import build_solver
 from pmpm.scene.config import load_scene, parse_scene
-from pmpm.physics.contact import ContactSolver
 
 comm = MPI.COMM_WORLD
 RTOL = 1e-10
@@ -49,14 +49,14 @@ def warm_kernels():
     race writing the same cache entries (what ``python -m pmpm.warmup`` does for the others)."""
     if comm.rank == 0:
         for scene in (_disks(), _slide()):
-            s = ContactSolver(scene, MPI.COMM_SELF)
+            s = build_solver(scene, MPI.COMM_SELF)
             s.step()
             s.step()
     comm.Barrier()
 
 
 def _run(scene, c):
-    s = ContactSolver(scene, c)
+    s = build_solver(scene, c)
     energies = []
     while s.t < scene.solver.end_time - 1e-12:
         s.step()

@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.core.shape import CPDI_REACH
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.errors import UnstableRunError
 from pmpm.scene.config import parse_scene
 
@@ -46,7 +46,7 @@ def _gather(c, s):
 def test_cpdi_gives_the_same_answer_on_k_ranks_as_on_one(shape):
     runs = []
     for c in (MPI.COMM_SELF, comm):
-        s = Solver(_scene(shape), c)
+        s = build_solver(_scene(shape), c)
         start = set(s.particles["id"].tolist())
         for _ in range(60):
             s.step()
@@ -63,7 +63,7 @@ def test_cpdi_gives_the_same_answer_on_k_ranks_as_on_one(shape):
 
 @pytest.mark.skipif(comm.size < 2, reason="needs mpirun -n 2 or more")
 def test_a_domain_stretched_past_the_ghost_width_stops_every_rank_naming_the_particle():
-    s = Solver(_scene("linear"), comm)
+    s = build_solver(_scene("linear"), comm)
     p = s.particles
     # rank 0's particle nearest its upper slab boundary, stretched along x by 3 cells more than
     # the reach the ghost width allows for

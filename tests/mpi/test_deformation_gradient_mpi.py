@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 comm = MPI.COMM_WORLD
@@ -30,7 +30,7 @@ def _scene():
 
 
 def _run(c, steps=60):
-    s = Solver(_scene(), c)
+    s = build_solver(_scene(), c)
     start = set(s.particles["id"].tolist())
     for _ in range(steps):
         s.step()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 comm = MPI.COMM_WORLD
@@ -36,7 +36,7 @@ def _scene(parallel):
 @pytest.mark.parametrize("parallel", [{}, {"rebalance_threshold": 1.05, "rebalance_interval": 5}])
 def test_tiles_on_slabs_equal_the_whole_window_to_the_bit(parallel):
     scene = _scene(parallel)
-    tiled, whole = Solver(scene, comm), Solver(scene, comm)
+    tiled, whole = build_solver(scene, comm), build_solver(scene, comm)
     tiled.window.use_tiles(2)
     whole.window.use_tiles(0)
     for _ in range(40):

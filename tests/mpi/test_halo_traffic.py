@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.benchmarks.block import block_scene
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 comm = MPI.COMM_WORLD
 
@@ -17,7 +17,7 @@ comm = MPI.COMM_WORLD
 def test_halo_bytes_do_not_grow_with_particles():
     sent = []
     for ppc, n in ((2, 20000), (3, 45000)):
-        s = Solver(block_scene(n, ppc=ppc), comm)
+        s = build_solver(block_scene(n, ppc=ppc), comm)
         s.step()
         s.decomp.reset_counters()
         for _ in range(5):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.results.recorder import StructuralRecorder
 from pmpm.scene.config import parse_scene
 
@@ -35,7 +35,7 @@ SCENE = {
 
 
 def _histories(c):
-    s = Solver(parse_scene(SCENE, "block.toml"), c)
+    s = build_solver(parse_scene(SCENE, "block.toml"), c)
     rec = StructuralRecorder(s)
     rows = []
     for _ in range(12):
@@ -52,7 +52,7 @@ needs_ranks = pytest.mark.skipif(comm.size < 2, reason="needs mpirun -n 2 or mor
 @needs_ranks
 def test_reactions_and_sections_do_not_depend_on_rank_count():
     par, solver = _histories(comm)
-    assert solver.reactions.names == ["floor", "side"]
+    assert solver.effect("reactions").names == ["floor", "side"]
     ok, message = True, ""
     if comm.rank == 0:
         ref, _ = _histories(MPI.COMM_SELF)

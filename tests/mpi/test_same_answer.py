@@ -13,7 +13,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.scene.config import load_scene, parse_scene
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker
 
 comm = MPI.COMM_WORLD
@@ -26,7 +26,7 @@ def _everywhere(ok):
 
 
 def _run(scene, c, steps=None):
-    s = Solver(scene, c)
+    s = build_solver(scene, c)
     tr = Tracker(scene.output.track, s)
     hist, energies = [], []
     while s.t < scene.solver.end_time - 1e-12 and (steps is None or s.step_count < steps):
@@ -109,7 +109,7 @@ def _travelling_block(ranks):
 @needs_ranks
 def test_empty_ranks_and_migration_across_every_boundary():
     scene = _travelling_block(comm.size)
-    s0 = Solver(scene, comm)
+    s0 = build_solver(scene, comm)
     empty_at_start = comm.allreduce(int(s0.particles.n == 0))
     ok, s = _compare(scene)
     assert ok
@@ -137,7 +137,7 @@ def test_rebalancing_keeps_the_balance_and_the_answer():
     }, "moving.toml")
     ok, _ = _compare(scene)
     assert ok
-    s = Solver(scene, comm)
+    s = build_solver(scene, comm)
     worst = 1.0
     while s.t < scene.solver.end_time - 1e-12:
         s.step()

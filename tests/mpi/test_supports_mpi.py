@@ -18,7 +18,7 @@ import sys
 import numpy as np
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "unit"))
@@ -37,8 +37,8 @@ def _scene():
 
 def _run(c):
     scene = _scene()
-    s = Solver(scene, c)
-    s.reactions.since = 0.0
+    s = build_solver(scene, c)
+    s.effect("reactions").since = 0.0
     tr = Tracker(scene.output.track, s)
     hist, energy, reaction = [], [], []
     while s.t < scene.solver.end_time - 1e-12:
@@ -47,7 +47,7 @@ def _run(c):
             hist.append(tr.sample()[0])
             e = s.energies()
             energy.append([e["kinetic"], e["internal_work"], e["external_work"]])
-            reaction.append(s.reactions.take(s.t, s.decomp.allreduce_sum)[0])
+            reaction.append(s.effect("reactions").take(s.t, s.decomp.allreduce_sum)[0])
     held = np.count_nonzero((s.particles["support"] >= 0).any(axis=1))
     fields = c.gather({k: s.particles[k] for k in ("id", "x", "v")}, root=0)
     holders = c.allgather(held)

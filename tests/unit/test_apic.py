@@ -121,11 +121,11 @@ def test_apic_conserves_angular_momentum_off_the_origin(scheme):
     round-off. Taken about o = (-2, 3), away from the origin and the body (a term that vanishes
     at the body's centre would hide there). FLIP does not conserve it: the same run with FLIP
     drifts by orders of magnitude more, which shows the check can fail."""
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     o = np.array([-2.0, 3.0])
     drift = {}
     for transfer in ("apic", "flip"):
-        s = Solver(_spinning_block(scheme, transfer), MPI.COMM_SELF)
+        s = build_solver(_spinning_block(scheme, transfer), MPI.COMM_SELF)
         L0 = _grid_angular_momentum(s, o)
         worst = 0.0
         for _ in range(150):
@@ -156,9 +156,9 @@ def test_apic_loses_less_than_pic_on_the_bar(tmp_path, monkeypatch):
 def test_an_unnamed_transfer_costs_nothing():
     """docs/effects.md: FLIP (the default) keeps no affine field and lists no transfer effect;
     naming APIC adds the field and says so at start."""
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.run import Run
-    flip = Solver(_spinning_block("musl", "flip"), MPI.COMM_SELF)
+    flip = build_solver(_spinning_block("musl", "flip"), MPI.COMM_SELF)
     assert "C" not in flip.particles.fields and flip.transfer.fields == {}
     run = Run(_spinning_block("musl", "apic"), MPI.COMM_SELF, write=False)
     assert run.solver.particles["C"].shape == (run.solver.particles.n, 4)

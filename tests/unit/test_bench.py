@@ -11,7 +11,7 @@ from mpi4py import MPI
 from pmpm.core import kernels as K
 from pmpm.benchmarks.block import YIELD_AFTER_STEPS, block_scene
 from pmpm.cli import main
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 
 def _run(argv):
@@ -97,7 +97,7 @@ def test_the_plastic_block_yields_before_timing(material):
     many steps before timing: when timing starts most particles are within 10% of the yield
     surface, and their increments fit one sub-step of the smooth model (0.1 of the yield
     strain). (The block's shear is not uniform: waves from the clamp; hence "most".)"""
-    s = Solver(block_scene(50000, material=material), MPI.COMM_SELF)
+    s = build_solver(block_scene(50000, material=material), MPI.COMM_SELF)
     for _ in range(YIELD_AFTER_STEPS):
         s.step()
     sy = s.materials[0].yield_stress

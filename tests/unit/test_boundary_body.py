@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.errors import ConfigError
 from pmpm.scene.config import parse_scene
 
@@ -31,7 +31,7 @@ def test_clamp_holds_the_face_while_the_beam_bends():
     """After 0.3 s of sudden gravity the tip has dropped, the clamped face has not: its particles
     are held by the velocity constraint, exactly up to rounding and the dependent rows dropped
     (the tolerance: 2% of the tip drop, the issue's bound)."""
-    s = Solver(_beam(0.125), MPI.COMM_SELF)
+    s = build_solver(_beam(0.125), MPI.COMM_SELF)
     while s.t < 0.3:
         s.step()
     p = s.particles
@@ -64,7 +64,7 @@ def test_bad_input_is_one_config_error(change, key):
 
 
 def test_gimp_domains_start_as_half_the_particle_spacing():
-    s = Solver(_beam(0.25, ppc=3, interpolation="ugimp"), MPI.COMM_SELF)
+    s = build_solver(_beam(0.25, ppc=3, interpolation="ugimp"), MPI.COMM_SELF)
     np.testing.assert_allclose(s.particles["domain"], 1 / 6, rtol=1e-12)  # (h / 3) / 2 in cells
 
 
@@ -72,7 +72,7 @@ def test_cpgimp_domains_follow_the_stretch_and_ugimp_domains_do_not():
     """Under gravity the hanging beam's top fibres stretch along x: their cpGIMP half-lengths
     grow with 1 + de_xx each step; uGIMP's stay at their start."""
     for interp in ("ugimp", "cpgimp"):
-        s = Solver(_beam(0.125, interpolation=interp), MPI.COMM_SELF)
+        s = build_solver(_beam(0.125, interpolation=interp), MPI.COMM_SELF)
         d0 = s.particles["domain"].copy()
         while s.t < 0.2:
             s.step()
@@ -93,15 +93,15 @@ def test_reaction_of_an_attached_clamp_closes_the_momentum_balance():
     import dataclasses
     scene = dataclasses.replace(scene, boundaries=tuple(dataclasses.replace(b, reaction=True)
                                                         for b in scene.boundaries))
-    s = Solver(scene, MPI.COMM_SELF)
-    s.reactions.since = 0.0
+    s = build_solver(scene, MPI.COMM_SELF)
+    s.effect("reactions").since = 0.0
     while s.t < 0.2:
         s.step()
     p = s.particles
-    impulse = s.reactions.take(s.t, lambda a: a)[0, :2] * s.t
+    impulse = s.effect("reactions").take(s.t, lambda a: a)[0, :2] * s.t
     expected = (p["m"][:, None] * p["v"]).sum(axis=0) - p["m"].sum() * np.array([0.0, -9.8]) * s.t
     assert abs(expected[1]) > 0.1 * p["m"].sum() * 9.8 * s.t   # the clamp carries real load
     np.testing.assert_allclose(impulse, expected, rtol=1e-6)
     # the default moment point is the centroid of the held particles (the face layer, a quarter
     # cell inside the face at 2 particles per cell)
-    np.testing.assert_allclose(s.reactions.points[0], [0.25 / 4, 1.25], rtol=1e-12)
+    np.testing.assert_allclose(s.effect("reactions").points[0], [0.25 / 4, 1.25], rtol=1e-12)

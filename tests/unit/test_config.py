@@ -2,7 +2,7 @@
 
 ``parse_scene`` checks the scene file alone; a body outside the grid, a boundary box with no node,
 a load box with no particle and a bad mesh file are found when the solver builds the particles
-(``Solver(scene, comm)``), before any kernel is compiled.
+(``build_solver(scene, comm)``), before any kernel is compiled.
 """
 import copy
 import json
@@ -74,10 +74,10 @@ def error_of(data, path="case.toml"):
 
 def solver_error(data, tmp_path):
     """The ConfigError raised while the solver sets the scene up on one rank."""
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     scene = parse_scene(data, str(tmp_path / "case.toml"))
     with pytest.raises(ConfigError) as info:
-        Solver(scene, MPI.COMM_SELF)
+        build_solver(scene, MPI.COMM_SELF)
     return info.value
 
 

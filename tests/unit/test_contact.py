@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from pmpm.build import build_solver
 from pmpm.scene.config import apply_overrides, load_scene, parse_scene
 from pmpm.physics.contact import ContactSolver, contact_slots
 from pmpm.errors import ConfigError
@@ -92,7 +93,7 @@ def test_the_run_chooses_the_solver_by_the_scene_alone():
 
 
 def _same_as_default(scene_a, scene_b, steps, rtol=0.0):
-    a, b = Solver(scene_a, SELF), ContactSolver(scene_b, SELF)
+    a, b = build_solver(scene_a, SELF), build_solver(scene_b, SELF)
     for _ in range(steps):
         a.step()
         b.step()
@@ -148,7 +149,7 @@ def test_touching_bodies_separate_freely_where_one_field_glues_them():
     of the interface, tension builds across it and pulls them back."""
     apart = [_block("a", (0.2, 0.1), (0.5, 0.3), (-0.1, 0.0)), _block("b", (0.5, 0.1), (0.8, 0.3), (0.1, 0.0))]
     for contact in ({"friction": 0.5}, None):
-        s = (ContactSolver if contact else Solver)(_scene(apart, contact), SELF)
+        s = build_solver(_scene(apart, contact), SELF)
         while s.t < 0.6 - 1e-12:
             s.step()
         a = s.particles["body"] == 0
@@ -166,7 +167,7 @@ def test_touching_bodies_separate_freely_where_one_field_glues_them():
 def disks():
     """cases/disks_contact.toml (the Sulsky disks with frictionless contact) to t = 3."""
     scene = load_scene("cases/disks_contact.toml")[0]
-    s = ContactSolver(scene, SELF)
+    s = build_solver(scene, SELF)
     rows, mind = [], np.inf
     while s.t < 3.0 - 1e-12:
         s.step()
@@ -249,7 +250,7 @@ def _slide(mu, theta_deg, end=0.4):
         "solver": {"end_time": end, "cfl": 0.5},
         "contact": {"friction": mu},
     }, "slide.toml")
-    s = ContactSolver(scene, SELF)
+    s = build_solver(scene, SELF)
     rows = []
     while s.t < end - 1e-12:
         s.step()

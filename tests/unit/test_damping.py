@@ -21,7 +21,7 @@ from mpi4py import MPI
 import pmpm
 from pmpm.core.kernels.damping import viscous_stress
 from pmpm.core.kernels.reference import viscous_stress_reference
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.physics.damping import rayleigh_coefficients, ratio_at
 from pmpm.scene.config import parse_scene
 
@@ -138,8 +138,8 @@ def test_off_when_not_asked():
     for loads in ({}, {"damping": {"ratio": 0.0, "periods": [0.1, 0.05]}}):
         sc = _cantilever(0.5, None, 0.001)
         sc["loads"] = loads
-        s = Solver(parse_scene(sc), MPI.COMM_SELF)
-        assert s.rayleigh is None and s.damping is None and "viscous_stress" not in s.particles
+        s = build_solver(parse_scene(sc), MPI.COMM_SELF)
+        assert s.effect("rayleigh_damping") is None and s.damping is None and "viscous_stress" not in s.particles
         assert s.dt == pytest.approx(0.9 * H / (1000.0 + s.vmax), rel=1e-12)
 
 

@@ -9,7 +9,7 @@ from mpi4py import MPI
 from pmpm.core import kernels as K
 from pmpm.core.kernels.reference import g2p_deformation_reference
 from pmpm.core.shape import SHAPE_TAGS, SHAPES
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.errors import ConfigError, UnstableRunError
 from pmpm.scene.config import parse_scene
 
@@ -72,9 +72,9 @@ def _spin_scene(**solver):
 def test_F_is_kept_only_when_the_scene_needs_it():
     """No material, rate or output needs F: it is not stored (off costs nothing); an output
     field F, or the Green-Naghdi rate, keeps it, starting from the identity with vol0 = vol."""
-    plain = Solver(_spin_scene(large_rotations=True), MPI.COMM_SELF)
+    plain = build_solver(_spin_scene(large_rotations=True), MPI.COMM_SELF)
     assert "F" not in plain.particles and "vol0" not in plain.particles and not plain.keeps_F
-    gn = Solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
+    gn = build_solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
     assert gn.keeps_F
     F = gn.particles["F"]
     np.testing.assert_array_equal(F, np.tile([1.0, 0.0, 0.0, 1.0, 1.0], (len(F), 1)))
@@ -87,7 +87,7 @@ def test_rigid_rotation_turns_F_into_the_rotation():
     longer a rigid rotation, the spinning square stretches) F = I + dt W, det F = 1 + (w dt)^2,
     the polar angle atan(w dt), to round-off; the solver's Green-Naghdi increment is that angle."""
     # (a fixed step below the CFL limit, 0.2 m / 33.1 m/s x 0.5 = 0.006 s: a larger one is refused)
-    s = Solver(_spin_scene(objective_rate="green_naghdi", time_step=0.005), MPI.COMM_SELF)
+    s = build_solver(_spin_scene(objective_rate="green_naghdi", time_step=0.005), MPI.COMM_SELF)
     s.step()  # (it sorts the particles: the mask is taken after it)
     deep = np.abs(s.particles["x"]).max(axis=1) < 1.2 - 3 * 0.2
     assert deep.sum() > 10
@@ -102,7 +102,7 @@ def test_rigid_rotation_turns_F_into_the_rotation():
 def test_inverted_F_stops_the_run_naming_the_particle():
     """det F <= 0 is a fault: the step raises UnstableRunError with the particle id, its
     position and the time (run.py then saves the last good state, as for any instability)."""
-    s = Solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
+    s = build_solver(_spin_scene(objective_rate="green_naghdi"), MPI.COMM_SELF)
     s.step()
     k = 7
     s.particles["F"][k, :4] = [1.0, 0.0, 0.0, -1.0]  # a reflection: det F = -1
@@ -140,7 +140,7 @@ def test_thickness_stretch_of_a_hypoelastic_material(formulation):
         "solver": {"end_time": 1.0},
         "output": {"fields": ["x", "F"]},
     }, "stretch.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     w, g = s.window, s.grid
     x = g.origin[0] + (w.ox + np.arange(w.shape[0])) * g.h
     for _ in range(n):

@@ -8,7 +8,7 @@ from mpi4py import MPI
 from pmpm.scene.config import parse_scene
 from pmpm.errors import ConfigError
 from pmpm.physics.groundmotion import G, read_record
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 E, RHO = 1e5, 100.0
 
@@ -47,7 +47,7 @@ def test_a_body_carried_rigidly_by_the_ground_shows_no_strain(tmp_path):
     """Every node moves with the ground: the velocity field is uniform, so its gradient (the
     strain rate) vanishes exactly by the partition of unity, and the body follows the ground."""
     path, t_rec, a_rec = _record(tmp_path)
-    s = Solver(_block(tmp_path, path), MPI.COMM_SELF)
+    s = build_solver(_block(tmp_path, path), MPI.COMM_SELF)
     while s.t < 0.5 - 1e-12:
         s.step()
     p = s.particles
@@ -66,7 +66,7 @@ def test_a_body_carried_rigidly_by_the_ground_shows_no_strain(tmp_path):
 def test_base_motion_shakes_a_free_standing_block(tmp_path):
     """Driven only at its base, the block deforms (inertia) and its base follows the ground."""
     path, t_rec, a_rec = _record(tmp_path)
-    s = Solver(_block(tmp_path, path, box_all=False, end=0.3), MPI.COMM_SELF)
+    s = build_solver(_block(tmp_path, path, box_all=False, end=0.3), MPI.COMM_SELF)
     while s.t < 0.3 - 1e-12:
         s.step()
     p = s.particles
@@ -85,7 +85,7 @@ def test_work_of_the_moving_base_converges_with_the_time_step(tmp_path):
     gaps = []
     for cfl in (0.5, 0.125):
         scene = _block(tmp_path, path, box_all=False, end=0.3)
-        s = Solver(dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, cfl=cfl)), MPI.COMM_SELF)
+        s = build_solver(dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, cfl=cfl)), MPI.COMM_SELF)
         while s.t < 0.3 - 1e-12:
             s.step()
         e = s.energies()
@@ -134,7 +134,7 @@ def test_mass_proportional_damping_decays_energy_as_exp_minus_alpha_t():
     damping ratio is alpha / (2 omega)); over two periods the mean energy follows it within a
     few percent, and kinetic + internal work + damping work stays equal to the initial energy."""
     alpha, T = 0.05, 20.0
-    s = Solver(_bar(alpha, T), MPI.COMM_SELF)
+    s = build_solver(_bar(alpha, T), MPI.COMM_SELF)
     e0 = s.energies()["total"]
     while s.t < T - 1e-12:
         s.step()
@@ -150,7 +150,7 @@ def test_damping_off_is_compiled_out_and_loses_nothing_else():
     vanishing coefficient (alpha = 1e-300, whose term alpha m v is below the rounding of every
     nodal force and velocity here), and it conserves energy (kinetic + internal work stays the
     initial energy to the 1% of the damped test above; no damping work)."""
-    off, tiny = Solver(_bar(0.0, 2.0), MPI.COMM_SELF), Solver(_bar(1e-300, 2.0), MPI.COMM_SELF)
+    off, tiny = build_solver(_bar(0.0, 2.0), MPI.COMM_SELF), build_solver(_bar(1e-300, 2.0), MPI.COMM_SELF)
     assert off.damping is None and tiny.damping == 1e-300  # compiled out, not multiplied by zero
     e0 = off.energies()["total"]
     for _ in range(30):

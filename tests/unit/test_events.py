@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import load_scene
 
 CASE = "cases/hard/column_loss.toml"
@@ -25,7 +25,7 @@ def short_scene(**extra):
 
 
 def _run(scene):
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     rows = []
     while s.t < scene.solver.end_time - 1e-12:
         s.step()
@@ -42,10 +42,10 @@ def removal():
 
 def test_the_body_leaves_at_the_end_of_its_fade(removal):
     s, rows = removal
-    body = [b.name for b in s.scene.bodies].index("middle column")
+    body = [b.name for b in short_scene().bodies].index("middle column")
     assert not np.any(s.particles["body"] == body)
     t, n = rows[:, 0], rows[:, 4]
-    ev = s.events[0]
+    ev = s.effect("events")[0]
     # every other particle is still there, and the body's particles left at the first step ending
     # at or after time + duration (not before)
     assert np.all(n[t < ev.time + ev.duration - 1e-12] == n[0])
@@ -64,7 +64,7 @@ def test_energy_balance_closes_with_the_removed_energy(removal):
     fast)."""
     s, rows = removal
     t, gap, removed, external = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
-    ev = s.events[0]
+    ev = s.effect("events")[0]
     before = t < ev.time
     window = (t >= ev.time - 1e-12) & (t <= ev.time + ev.duration + 2 * s.dt)
     own = np.abs(gap[before]).max()
@@ -79,16 +79,16 @@ def test_energy_balance_closes_with_the_removed_energy(removal):
 def test_force_stress_is_the_stress_itself_until_the_event_acts():
     """An event costs nothing until its time: the force stress is the particles' stress array
     (no copy); while it fades, the body's rows are scaled by 1 - (t - time) / duration."""
-    s = Solver(short_scene(), MPI.COMM_SELF)
+    s = build_solver(short_scene(), MPI.COMM_SELF)
     assert s.force_stress() is s.particles["stress"]
-    ev = s.events[0]
+    ev = s.effect("events")[0]
     s.t = ev.time + 0.4 * ev.duration
     f = s.force_stress()
     rows = s.particles["body"] == ev.body
     np.testing.assert_allclose(f[rows], 0.6 * s.particles["stress"][rows][:, :3], rtol=1e-14)
     np.testing.assert_array_equal(f[~rows], s.particles["stress"][~rows][:, :3])
-    none = Solver(short_scene(events=[]), MPI.COMM_SELF)
-    assert none.events == [] and none.force_stress() is none.particles["stress"]
+    none = build_solver(short_scene(events=[]), MPI.COMM_SELF)
+    assert none.effect("events") is None and none.force_stress() is none.particles["stress"]
 
 
 def test_heavy_floor_turns_the_beam_to_catenary_tension():

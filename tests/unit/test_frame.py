@@ -191,7 +191,7 @@ def test_nodal_masses_add_exactly_their_mass_to_the_joint_panel():
     material; the particles' total mass grows by exactly the masses, and the mass sits in the
     panel (its centroid is the node's height)."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     plain = two_storey()
     heavy = two_storey(masses=[{"node": "n01", "mass": 5000.0}, {"node": "n12", "mass": 2500.0}])
     out = expand_frame(heavy)
@@ -200,8 +200,8 @@ def test_nodal_masses_add_exactly_their_mass_to_the_joint_panel():
     assert out["materials"]["steel+n01"]["E"] == 2e11
     for data in (plain, heavy):
         data["particles_per_cell"] = 3   # 11 rows across W14X90 at 0.1 m cells (7 cannot carry its I)
-    pa = Solver(parse_scene(plain), MPI.COMM_SELF).particles
-    pb = Solver(parse_scene(heavy), MPI.COMM_SELF).particles
+    pa = build_solver(parse_scene(plain), MPI.COMM_SELF).particles
+    pb = build_solver(parse_scene(heavy), MPI.COMM_SELF).particles
     assert pb["m"].sum() == pytest.approx(pa["m"].sum() + 7500.0, rel=1e-12)
     assert pb["m"][pb["mat"] != 0].sum() > 7500.0 and len(np.unique(pb["mat"])) == 3
     panel = pb["body"] == names.index("c00_panel_n01")

@@ -18,7 +18,7 @@ from pmpm.core.kernels import grid_ops
 from pmpm.core.kernels.reference import basis_matrix
 from pmpm.core.kernels.reference_tiles import mark_tiles_reference, tile_node_mask, zero_tiles_reference
 from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 H = 0.25
@@ -153,7 +153,7 @@ def _scene(shape, scheme, interpolation):
     ("cubic", "musl", "cpgimp")])
 def test_a_run_with_tiles_equals_the_whole_window_to_the_bit(shape, scheme, interpolation):
     scene = _scene(shape, scheme, interpolation)
-    tiled, whole = Solver(scene, MPI.COMM_SELF), Solver(scene, MPI.COMM_SELF)
+    tiled, whole = build_solver(scene, MPI.COMM_SELF), build_solver(scene, MPI.COMM_SELF)
     tiled.window.use_tiles(2)
     whole.window.use_tiles(0)
     w = tiled.window
@@ -182,12 +182,12 @@ def test_tiles_are_chosen_for_sparse_windows_only():
     assert choose_tile(10_000, 10_000 / TILE_NODES_PER_PARTICLE) == 0
     assert choose_tile(100, 0) == TILE
     scene = _scene("cubic", "musl", "point")   # 17 x 11 nodes, 48 particles: 3.9 per particle
-    dense = Solver(scene, MPI.COMM_SELF)
-    sparse = Solver(dataclasses.replace(scene, grid=dataclasses.replace(scene.grid, cells=[32, 20])),
+    dense = build_solver(scene, MPI.COMM_SELF)
+    sparse = build_solver(dataclasses.replace(scene, grid=dataclasses.replace(scene.grid, cells=[32, 20])),
                     MPI.COMM_SELF)             # 33 x 21 nodes: 14 per particle
     assert dense.particles.n == sparse.particles.n == 48
     assert dense.window.tile == 0 and dense.window.tiles is None
     assert sparse.window.tile == TILE and sparse.window.tiles is not None
     # CPDI's corners are not bounded by the ghost width on one rank: never tiles
     cpdi = dataclasses.replace(sparse.scene, solver=dataclasses.replace(sparse.scene.solver, interpolation="cpdi"))
-    assert Solver(cpdi, MPI.COMM_SELF).window.tiles is None
+    assert build_solver(cpdi, MPI.COMM_SELF).window.tiles is None

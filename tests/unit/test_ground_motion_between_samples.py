@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.physics.groundmotion import GroundMotion
 from pmpm.scene.config import parse_scene
 
@@ -88,7 +88,7 @@ def test_a_body_carried_by_the_ground_moves_with_it_step_by_step(tmp_path):
         "loads": {"ground_motion": {"file": str(_record(tmp_path)), "direction": "y"}},
         "solver": {"end_time": 0.17, "cfl": 0.37},
     }, str(tmp_path / "carried.toml"))
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     p = s.particles
     order = np.argsort(p["id"])
     y0 = p["x"][order, 1].copy()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.errors import ConfigError
 from pmpm.scene.config import parse_scene
 from pmpm.scene.limits import check_memory, check_time_step, estimate_bytes, estimate_particles
@@ -29,7 +29,7 @@ def _data(cells=(40, 20), h=0.1, ppc=2, time_step=None, end_time=1.0, **solver):
 
 def test_memory_estimate_covers_what_the_solver_allocates():
     scene = parse_scene(_data())
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     w = s.window
     window = w.G.nbytes + w.bc_mask.nbytes + w.bc_vel.nbytes
     particles = sum(a.nbytes for a in s.particles.fields.values())

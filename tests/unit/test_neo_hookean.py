@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.physics.materials import make_material
 from pmpm.physics.materials.linear_elastic import elastic_increment
 from pmpm.physics.materials.neo_hookean import lame, neo_hookean_reference
@@ -124,7 +124,7 @@ def test_material_that_needs_F_makes_the_run_keep_it_and_report_W():
         "solver": {"end_time": 1.0},
         "output": {"fields": ["x", "stress"]},
     }, "nh.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     assert s.keeps_F
     for _ in range(3):
         s.step()
@@ -160,7 +160,7 @@ def test_internal_work_converges_to_the_stored_energy(formulation):
                         "velocity": ["3.0 * (x - 1.5)", "-1.0 * (y - 1.5) + 2.0 * (x - 1.5)"]}],
             "solver": {"end_time": 0.1, "cfl": cfl},
         }, "energy.toml")
-        s = Solver(scene, MPI.COMM_SELF)
+        s = build_solver(scene, MPI.COMM_SELF)
         while s.t < 0.1 - 1e-12:
             s.step()
         e = s.energies()

@@ -7,7 +7,7 @@ from mpi4py import MPI
 
 from pmpm.scene.config import parse_scene
 from pmpm.core.kernels import jaumann_rotate
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 
 def test_many_small_spins_rotate_the_stress_like_the_rotation_matrix():
@@ -45,7 +45,7 @@ def test_rigid_rotation_makes_no_strain():
                     "velocity": [f"-{w} * y", f"{w} * x"]}],
         "solver": {"end_time": 1.0, "cfl": 0.5, "large_rotations": True},
     }, "spin.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     s.step()
     deep = np.abs(s.particles["x"]).max(axis=1) < 1.2 - 3 * 0.2  # support far from the edges
     assert deep.sum() > 10

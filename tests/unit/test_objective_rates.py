@@ -26,7 +26,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.core import kernels as K
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 E, NU = 2e11, 0.3
@@ -62,7 +62,7 @@ def shear(material, rate, formulation, gamma_end, steps, samples=8):
         "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.5, 0.5], "upper": [1.0, 1.0]}],
         "solver": {"end_time": 1.0, "objective_rate": rate},
     }, "shear.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     w, g = s.window, s.grid
     y = g.origin[1] + (w.oy + np.arange(w.shape[1])) * g.h
     dt, rate_gamma = 1e-3, gamma_end / (steps * 1e-3)

@@ -29,7 +29,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.core import kernels as K
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 E, NU, SY, ALPHA = 2e11, 0.3, 2.5e8, 0.05
@@ -53,7 +53,7 @@ def _solver(material, rate, formulation):
         "bodies": [{"shape": "rectangle", "material": "m", "lower": [0.8, -0.7], "upper": [1.3, -0.2]}],
         "solver": {"end_time": 1.0, "objective_rate": rate},
     }, "rotation.toml")
-    return Solver(scene, MPI.COMM_SELF)
+    return build_solver(scene, MPI.COMM_SELF)
 
 
 def _rot(theta):
@@ -255,7 +255,7 @@ def test_a_spinning_yielded_block_carries_its_back_stress_round(material, rate):
                     "velocity": [f"-{omega} * (y - {yc})", f"{omega} * (x - {xc})"]}],
         "solver": {"end_time": theta_end / omega, "cfl": 0.5, "objective_rate": rate},
     }, "spin.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     p = s.particles
     p["back_stress"][:] = eta0
     p["eps_p_eq"][:] = 0.01

@@ -95,7 +95,7 @@ def test_nothing_exists_when_nothing_is_asked(tmp_path):
             "boundary": [{"type": "fixed", "lower": [0.0, 0.0], "upper": [4.0, 0.0]}],
             "solver": {"end_time": 0.05}, "output": {"directory": str(tmp_path)}}
     run = Run(parse_scene(data, str(tmp_path / "plain.toml")), MPI.COMM_SELF)
-    assert run.solver.reactions is None and run.solver.sections == [] and run.structural is None
+    assert run.solver.effect("reactions") is None and run.solver.effect("sections") is None and run.structural is None
     run.execute()
     with h5py.File(run.path) as f:
         assert "sections" not in f and "reactions" not in f

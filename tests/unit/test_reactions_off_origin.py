@@ -9,7 +9,7 @@ from mpi4py import MPI
 from pmpm.core import kernels as K
 from pmpm.core.grid import Grid, GridWindow
 from pmpm.core.kernels.reference import reaction_reference
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.results.reactions import Reactions, node_centroid
 from pmpm.results.recorder import StructuralRecorder
 from pmpm.scene.config import BoundaryConfig, parse_scene
@@ -41,7 +41,7 @@ def test_a_held_body_reacts_with_minus_its_loads_and_their_moment():
                   "forces": [{"name": "push", "lower": [2.75, -1.45], "upper": [3.2, -1.2], "force": list(F)}]},
         "solver": {"end_time": 1.0},
     }, "held.toml")
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     rec = StructuralRecorder(s)
     rec.sample()  # the start: no interval yet
     for _ in range(7):

@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.core import kernels as K
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 
@@ -35,7 +35,7 @@ def _run(scene, monkeypatch=None):
                 calls[_name] += 1
                 return _kernel(*args)
             monkeypatch.setattr(K, name, counted)
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     while s.t < scene.solver.end_time * (1 - 1e-12):
         s.step()
     return s, calls

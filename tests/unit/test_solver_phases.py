@@ -9,7 +9,7 @@ from mpi4py import MPI
 
 from pmpm.core import kernels as K
 from pmpm.core.kernels.reference import basis_matrix, g2p_kinematics_reference, p2g_reference
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
@@ -41,7 +41,7 @@ def test_particles_to_grid_scatters_internal_body_and_set_forces(shape):
     """particles_to_grid(forces=True) is what the solver runs: internal force, m g and the force
     set's shares w_p F (through scatter_point_loads, not p2g's load_id path) on the nodes, eq. 2.
     Tolerance: round-off of sums of O(100) terms of O(1)."""
-    s = Solver(_scene(shape), MPI.COMM_SELF)
+    s = build_solver(_scene(shape), MPI.COMM_SELF)
     p = s.particles
     rng = np.random.default_rng(2)
     p["stress"][:] = rng.normal(size=p["stress"].shape)
@@ -68,7 +68,7 @@ def test_musl_strain_comes_from_the_remapped_momenta():
     particle momenta back to the grid, v_i = sum_p N_ip m_p v_p / m_i (prescribed where the
     supports are), and takes the strain increment from that field, not from the updated grid
     velocity. Rebuilt here with the NumPy basis; tolerance: round-off."""
-    s = Solver(_scene(forces=False), MPI.COMM_SELF)
+    s = build_solver(_scene(forces=False), MPI.COMM_SELF)
     p = s.particles
     x0, vol0 = p["x"].copy(), p["vol"].copy()
     dt = s.dt
@@ -94,7 +94,7 @@ def test_musl_strain_comes_from_the_remapped_momenta():
 def test_cfl_step_is_c_h_over_wave_speed_plus_particle_speed(v0):
     """dt = C h / (c + |v|max) with c = sqrt(E / (rho (1 - nu^2))), the plane-stress
     dilatational speed (c = 10.5 here, so v0 = 40 changes dt fivefold)."""
-    s = Solver(_scene(velocity=(v0, 0.0), forces=False), MPI.COMM_SELF)
+    s = build_solver(_scene(velocity=(v0, 0.0), forces=False), MPI.COMM_SELF)
     c = math.sqrt(E / (RHO * (1 - NU ** 2)))
     assert s.dt == pytest.approx(0.4 * H / (c + v0), rel=1e-12)
     assert s.critical_dt() == pytest.approx(H / (c + v0), rel=1e-12)

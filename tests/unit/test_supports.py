@@ -10,7 +10,7 @@ from mpi4py import MPI
 
 from pmpm.core.kernels.support import row_width, support_rows, support_rows_reference
 from pmpm.core.shape import shape_argument
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 ORIGIN = np.array([-0.3, 0.2])
@@ -73,7 +73,7 @@ def test_projection_is_the_smallest_change_of_kinetic_energy_that_holds_the_face
     the projection the held particles' interpolated velocity is zero, and the change of the
     nodal velocities is the one an independent solution of min 1/2 dv^T M dv subject to
     N (v + dv) = 0 gives (least squares on the KKT system); nodes a box fixes are not moved."""
-    s = Solver(_beam(-0.6 - 0.125 / 4), MPI.COMM_SELF)
+    s = build_solver(_beam(-0.6 - 0.125 / 4), MPI.COMM_SELF)
     for _ in range(20):
         s.step()
     s.reset_grid()
@@ -82,11 +82,12 @@ def test_projection_is_the_smallest_change_of_kinetic_energy_that_holds_the_face
     w = s.window
     G = w.G
     before = G.copy()
-    supports, s.supports = s.supports, None
+    supports, effects = s.effect("supports"), s.effects
+    s.set_effects([e for e in effects if e is not supports])
     s.update_grid(s.dt)                       # the free grid update
     free = G.copy()
     G[...] = before
-    s.supports = supports
+    s.set_effects(effects)
     s.update_grid(s.dt)                       # with the projection
     p = s.particles
     idx = np.nonzero((p["support"] >= 0).any(axis=1))[0]
@@ -116,7 +117,7 @@ def test_projection_is_the_smallest_change_of_kinetic_energy_that_holds_the_face
 
 def _history(scene):
     from pmpm.io.tracking import Tracker
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tr = Tracker(scene.output.track, s)
     t, uy, moved = [], [], 0.0
     while s.t < scene.solver.end_time - 1e-12:
@@ -182,14 +183,14 @@ def test_the_old_clamp_would_have_torn_here():
     run (they interpolate from free nodes inside the body)."""
     h = 0.125
     scene = _beam(-0.75 - h / 4, h=h, end_time=0.3)
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     # the old rule: fix the nodes the face's particles reach on the face's side of the layer
     p = s.particles
     face = (p["support"] >= 0).any(axis=1)
     layer_x = p["x"][face, 0].min()
     X, Y = s.window.node_coords()
     reach = (np.abs(X - layer_x) < 2 * h) & (X <= layer_x) & (Y > 1.0 - 2 * h) & (Y < 1.5 + 2 * h)
-    s.supports = None
+    s.set_effects([e for e in s.effects if e.name != "supports"])
     s.window.bc_mask[reach] = 1
     while s.t < scene.solver.end_time - 1e-12:
         s.step()
@@ -206,7 +207,7 @@ def test_the_solve_kernel_and_its_numpy_twin_give_the_same_corrections(interpola
     fixes part of the nodes, so their columns drop out; a support holds one component only."""
     from pmpm.core.kernels.support import support_gather, support_solve, support_solve_reference
     from pmpm.physics.supports import RANK_TOLERANCE
-    s = Solver(_beam(-0.6 - 0.125 / 4, interpolation=interpolation), MPI.COMM_SELF)
+    s = build_solver(_beam(-0.6 - 0.125 / 4, interpolation=interpolation), MPI.COMM_SELF)
     for _ in range(15):
         s.step()
     s.reset_grid()
@@ -218,7 +219,8 @@ def test_the_solve_kernel_and_its_numpy_twin_give_the_same_corrections(interpola
         # corners' rows on the few free nodes left are near-dependent, and the two solutions
         # part: a box overlapping an attached face is not a case the supports are made for)
         w.bc_mask[:, :8, :] = 1
-    supports, s.supports = s.supports, None
+    supports = s.effect("supports")
+    s.set_effects([e for e in s.effects if e is not supports])
     s.update_grid(s.dt)
     _, ids, sup, nodes, weights = supports._local_rows(s)
     mass = np.empty(nodes.shape)
@@ -261,7 +263,7 @@ def test_two_faces_share_their_corner_particle_component_by_component():
         "loads": {"gravity": [0.0, -9.8]},
         "solver": {"end_time": 0.05},
     }
-    s = Solver(parse_scene(data, "beam.toml"), MPI.COMM_SELF)
+    s = build_solver(parse_scene(data, "beam.toml"), MPI.COMM_SELF)
     p = s.particles
     x0 = p["x0"]
     corner = np.argmin(x0[:, 0] + x0[:, 1])

@@ -10,7 +10,7 @@ from functools import lru_cache
 import numpy as np
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker
 from pmpm.results.recorder import StructuralRecorder
 from pmpm.scene.config import apply_overrides, parse_scene, read_toml
@@ -61,7 +61,7 @@ def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None, scene=SCENE
     """Run the frame serially to ``t_end`` and sample every ``every`` steps: time, the upper-left
     joint's ux, base moments and energies; the solver is returned for its final state."""
     scene = frame_scene(variant, damping, cell_size, scene, supports, load_scale)
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tr = Tracker([t for t in scene.output.track if t.name == "upper_left_joint"], s)
     rec = StructuralRecorder(s)
     t, ux, moments, energies, cuts, reactions = [], [], [], [], [], []
@@ -76,5 +76,5 @@ def run_frame(variant, t_end, damping=0.0, every=20, cell_size=None, scene=SCENE
             cuts.append(c.copy())
             reactions.append(r.copy())
     return {"t": np.array(t), "ux": np.array(ux), "moments": np.array(moments),
-            "energies": energies, "solver": s, "cut_names": [c.name for c in s.sections],
+            "energies": energies, "solver": s, "cut_names": [c.name for c in (s.effect("sections") or [])],
             "cuts": np.array(cuts), "reaction_names": list(rec.reaction_names), "reactions": np.array(reactions)}

@@ -9,7 +9,7 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.scene.config import load_scene, parse_scene
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 L, E, RHO = 25.0, 100.0, 1.0
 BETA = math.pi / (2 * L)
@@ -33,7 +33,7 @@ def bar_scene(cells, shape="cubic", v0=1e-3, scheme="musl", ppc=2, cfl=0.5, end=
 
 def run_bar(scene, v0):
     """Max over the run of |u - u_exact| / amplitude (all particles), and the energy history."""
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     amp = v0 / OMEGA
     err, energy = 0.0, [s.energies()["total"]]
     while s.t < scene.solver.end_time - 1e-12:
@@ -50,7 +50,7 @@ def test_bar_case_mid_length_displacement_within_one_percent():
     """The shipped case (v0 = 0.1, cubic B-splines, MUSL) over one period: mid-length
     displacement within 1% of the exact amplitude, total energy constant within 1%."""
     scene = load_scene("cases/bar.toml")[0]
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     mid = int(np.argmin(np.abs(s.particles["x0"][:, 0] - L / 2)))
     x_mid = s.particles["x0"][mid, 0]
     v0 = 0.1

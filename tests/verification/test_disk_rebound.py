@@ -21,7 +21,7 @@ import pytest
 import tomllib
 from mpi4py import MPI
 
-from pmpm.physics.contact import ContactSolver
+from pmpm.build import build_solver
 from pmpm.scene.config import parse_scene
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -39,7 +39,7 @@ def mpm_rebound(h, end=2.2):
     data["grid"] = {"origin": [0.0, 0.0], "cell_size": h, "cells": [round(1 / h)] * 2}
     data["bodies"] = [dict(data["bodies"][0], center=[0.33, 0.33]), dict(data["bodies"][1], center=[0.67, 0.67])]
     data["solver"] = {"end_time": end, "cfl": data["solver"]["cfl"]}
-    s = ContactSolver(parse_scene(data, "disks.toml"), MPI.COMM_SELF)
+    s = build_solver(parse_scene(data, "disks.toml"), MPI.COMM_SELF)
     v0 = math.hypot(*data["bodies"][0]["velocity"])
     last = []
     while s.t < end - 1e-12:

@@ -6,14 +6,14 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.scene.config import load_scene
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 
 KE0 = 2 * 0.5 * (1000 * math.pi * 0.2 ** 2) * (0.1 ** 2 + 0.1 ** 2)  # 2.513 per unit thickness
 
 
 @pytest.fixture(scope="module")
 def history():
-    s = Solver(load_scene("cases/two_disks.toml")[0], MPI.COMM_SELF)
+    s = build_solver(load_scene("cases/two_disks.toml")[0], MPI.COMM_SELF)
     rows = []
     while s.t < 3.0 - 1e-12:
         s.step()
@@ -27,7 +27,7 @@ def history():
 
 
 def test_initial_kinetic_energy_is_sulskys(history):
-    s = Solver(load_scene("cases/two_disks.toml")[0], MPI.COMM_SELF)
+    s = build_solver(load_scene("cases/two_disks.toml")[0], MPI.COMM_SELF)
     assert s.energies()["kinetic"] == pytest.approx(KE0, rel=1e-12)  # volumes carry the exact area
     assert KE0 == pytest.approx(2.513, abs=5e-4)
 

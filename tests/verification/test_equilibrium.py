@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.results.recorder import StructuralRecorder
 from pmpm.scene.config import parse_scene
 
@@ -52,7 +52,7 @@ SECTION_X = np.array([0.25, 0.375, 0.5, 0.625, 0.75])
 def _solver(damping, comm=MPI.COMM_SELF):
     data = copy.deepcopy(CANTILEVER)
     data["loads"]["damping"] = damping
-    return Solver(parse_scene(data, "cantilever.toml"), comm)
+    return build_solver(parse_scene(data, "cantilever.toml"), comm)
 
 
 def _momentum(s):

@@ -18,8 +18,8 @@ from mpi4py import MPI
 sys.path.insert(0, os.path.dirname(__file__))
 import frame_runs  # noqa: E402
 
+from pmpm.build import build_solver
 from pmpm.core.kernels import MASS  # noqa: E402
-from pmpm.core.solver import Solver  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 HANDWRITTEN = os.path.join(HERE, "portal_frame_handwritten.toml")
@@ -41,7 +41,7 @@ def _peak_and_period(t, u):
 def solvers():
     out = {}
     for name, path in (("frame", FRAME), ("hand", HANDWRITTEN)):
-        out[name] = Solver(frame_runs.frame_scene("elastic", scene=path), MPI.COMM_SELF)
+        out[name] = build_solver(frame_runs.frame_scene("elastic", scene=path), MPI.COMM_SELF)
     return out
 
 

@@ -3,8 +3,8 @@
 ``cases/frame_3storey.toml``'s ``ground_motion`` variant shakes the SAC three-storey frame with
 ``cases/records/synthetic_quake.AT2``. Its supports are not written as ``[[boundary]]`` tables:
 the front end (pmpm.scene.frame) generates them, one ``fixed`` box per support on the grid node
-line y = 0, with no ``body``. pmpm.physics.groundmotion drives every ``fixed`` box support when
-``[loads.ground_motion]`` names no boundaries, so the generated ones are driven: checked here on
+line y = 0, with no ``body``. pmpm.physics.effect("ground_motion")motion drives every ``fixed`` box support when
+``[loads.effect("ground_motion")_motion]`` names no boundaries, so the generated ones are driven: checked here on
 the case itself at 0.2 m cells (3 x 3 particles per cell, about 12,000 particles), 0.2 s of the
 record (about 5,900 steps, some 30 s on this host), against the record integrated here:
 
@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.core.solver import Solver
+from pmpm.build import build_solver
 from pmpm.scene.config import apply_overrides, parse_scene, read_toml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -77,7 +77,7 @@ def u_exact(t):
 def coarse_scene():
     """The case's ground_motion variant on cells of H over the case's own domain."""
     data = read_toml(CASE)
-    data = apply_overrides(data, data["variants"]["ground_motion"], "variants.ground_motion")
+    data = apply_overrides(data, data["variants"]["ground_motion"], "variants.effect("ground_motion")_motion")
     grid = data["grid"]
     cells = [int(round(grid["cell_size"] * n / H)) for n in grid["cells"]]
     data["grid"] = dict(grid, cell_size=H, cells=cells)
@@ -89,9 +89,9 @@ def coarse_scene():
 def run():
     scene = coarse_scene()
     assert not scene.loads.forces, "the ground_motion variant has no other load"
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     p = s.particles
-    assert s.scene.solver.transfer == "flip" and s.scene.solver.pic_blend == 0.0  # momentum: see below
+    assert s.transfer.name == "flip" and s.transfer.pic_blend == 0.0  # momentum: see below
     x0 = p["x"][np.argsort(p["id"])].copy()
     base = x0[:, 1] < H / 3            # the lowest particle row (at h / 6 with 3 per cell)
     floor2 = (np.abs(x0[:, 1] - STOREY) < 0.3) & (np.min([np.abs(x0[:, 0] - c) for c in COLUMNS], axis=0) < 0.3)
@@ -104,7 +104,7 @@ def run():
         dt = s.t - t_before
         v = v_exact(s.t)
         u_sum += dt * v               # the solver moves particles with the step's end velocity
-        g = s.ground
+        g = s.effect("ground_motion")
         err = np.abs(s.window.bc_vel[g.nodes[0], g.nodes[1], 0] - v).max()
         out["bc_error"] = max(out["bc_error"], err)
         out["vmax"] = max(out["vmax"], abs(v))
@@ -114,7 +114,7 @@ def run():
         out["u_base"].append(ux[base])
         out["u_floor2"].append(ux[floor2].mean())
         out["P"].append(float((p["m"] * p["v"][:, 0]).sum()))
-        out["J"].append(float(s.reactions.sums[:, 0].sum()))   # never taken here: the sums since t = 0
+        out["J"].append(float(s.effect("reactions").sums[:, 0].sum()))   # never taken here: the sums since t = 0
     for k in ("t", "u_sum", "P", "J", "u_floor2"):
         out[k] = np.array(out[k])
     out["u_base"] = np.array(out["u_base"])
@@ -126,7 +126,7 @@ def test_the_generated_supports_are_the_driven_nodes(run):
     s, scene = run["solver"], run["scene"]
     supports = [b for b in scene.boundaries if b.name in ("c0_f0", "c1_f0", "c2_f0")]
     assert len(supports) == 3 and all(b.type == "fixed" and b.body is None for b in supports)
-    assert sorted(b.name for b in s.ground.boundaries) == ["c0_f0", "c1_f0", "c2_f0"]
+    assert sorted(b.name for b in s.effect("ground_motion").boundaries) == ["c0_f0", "c1_f0", "c2_f0"]
     # the grid nodes inside the three boxes (on y = 0), computed here from the boxes' corners
     w0 = s.decomp.window[0]
     want = set()
@@ -134,7 +134,7 @@ def test_the_generated_supports_are_the_driven_nodes(run):
         i_lo = int(np.ceil((b.lower[0] - scene.grid.origin[0]) / H - 1e-9))
         i_hi = int(np.floor((b.upper[0] - scene.grid.origin[0]) / H + 1e-9))
         want |= {(i - w0, 0) for i in range(max(i_lo, 0), i_hi + 1)}
-    got = set(zip(s.ground.nodes[0].tolist(), s.ground.nodes[1].tolist()))
+    got = set(zip(s.effect("ground_motion").nodes[0].tolist(), s.effect("ground_motion").nodes[1].tolist()))
     assert got == want and len(got) >= 3 * 6   # each box spans the column depth plus 2 cells a side
     # every step, the exact ground velocity at the step's end (round-off of Simpson's few terms)
     assert run["bc_error"] <= 1e-12 * run["vmax"]

@@ -22,7 +22,7 @@ from mpi4py import MPI
 sys.path.insert(0, os.path.dirname(__file__))
 import frame_fe_model as fem  # noqa: E402
 
-from pmpm.core.solver import Solver  # noqa: E402
+from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker  # noqa: E402
 from pmpm.scene.config import load_scene  # noqa: E402
 
@@ -39,7 +39,7 @@ def run():
     scene = load_scene(CASE, "elastic")[0]
     scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, end_time=T_SHORT),
                                 output=dataclasses.replace(scene.output, checkpoint_interval=None))
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracker = Tracker([tr for tr in scene.output.track if tr.name == "upper_left_joint"], s)
     t, u = [0.0], [0.0]
     while s.t < T_SHORT * (1 - 1e-12):

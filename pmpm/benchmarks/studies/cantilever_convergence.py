@@ -124,12 +124,12 @@ def run_variant(variant, sample_every=5, log=None):
     """Run one variant serially; returns (summary dict, history (samples, 4): t, tip ux, tip uy,
     corner uy)."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     from pmpm.scene.config import load_scene
 
     scene = load_scene(CASE, variant)[0]
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracker = Tracker(scene.output.track, s)
     names = [t.name for t in scene.output.track]
     ppc = scene.bodies[0].particles_per_cell

@@ -54,12 +54,12 @@ def _grid_velocity_at_particles(s):
 def run(case, variant, overrides, fe_path, sample_every=10):
     """Run one variant; returns the summary dict (see the module docstring)."""
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     from pmpm.scene.config import load_scene
 
     scene = load_scene(case, variant, overrides=overrides or None)[0]
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracker = Tracker(scene.output.track, s)
     corner = [t.name for t in scene.output.track].index("corner")
     gravity = np.asarray(scene.loads.gravity)

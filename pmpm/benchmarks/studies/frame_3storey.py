@@ -140,11 +140,11 @@ def run_cell(h, ppc=3, t_end=1.5, every=10, comm=None, progress=True, joint_forc
     ``joint_forces``); sample the joints' ux and the energies every ``every`` steps."""
     from mpi4py import MPI
 
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     comm = comm or MPI.COMM_WORLD
     scene = scene_at(h, ppc, joint_forces=joint_forces)
-    s = Solver(scene, comm)
+    s = build_solver(scene, comm)
     tracker = Tracker([t for t in scene.output.track if t.name in JOINTS], s)
     order = [[t.name for t in scene.output.track if t.name in JOINTS].index(n) for n in JOINTS]
     particles = comm.allreduce(len(s.particles["x"]))

@@ -3,7 +3,7 @@
 The case (docs/hard_cases.md) runs at 0.05 m cells in CI; its convergence check, the drift of the
 upper-left joint at the comparison time within 3% between 0.05 m and 0.025 m cells, needs the
 0.025 m run (8 times the work: 4 times the particles, twice the steps), too slow for CI, so it
-lives here. Each cell size runs in-process on one rank (``Solver(scene, MPI.COMM_SELF)``), the
+lives here. Each cell size runs in-process on one rank (``build_solver(scene, MPI.COMM_SELF)``), the
 finer grid covering the same extent with the same particles per cell (the bodies are regenerated
 with their area and second moment matched to the W shapes at each cell size).
 
@@ -73,10 +73,10 @@ def run_collapse(scene, t_compare, progress=None):
     """
     from mpi4py import MPI
 
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
 
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracker = Tracker([tr for tr in scene.output.track if tr.name == TRACK], s)
     end = scene.solver.end_time
     e0 = s.initial_energy

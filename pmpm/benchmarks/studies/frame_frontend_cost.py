@@ -25,9 +25,9 @@ SCENES = {"frame": os.path.join(ROOT, "cases", "portal_frame.toml"),
 def _solver(path):
     from mpi4py import MPI
 
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.scene.config import load_scene
-    return Solver(load_scene(path, "elastic")[0], MPI.COMM_SELF)
+    return build_solver(load_scene(path, "elastic")[0], MPI.COMM_SELF)
 
 
 def main(argv=None):

@@ -1,7 +1,7 @@
 """Resolution study of the paper's steel portal frame (cases/portal_frame.toml).
 
 For each cell size, both variants (``elastic``, ``elastoplastic``) run in-process on one rank
-(``Solver(scene, MPI.COMM_SELF)``, as tests/verification/test_portal_frame.py does), with the grid's
+(``build_solver(scene, MPI.COMM_SELF)``, as tests/verification/test_portal_frame.py does), with the grid's
 cells scaled so the domain stays x in [-0.5, 6.6], y in [0, 4.2]. Everything else (bodies, bases,
 load, CFL 0.5, cubic B-splines, MUSL, 2 x 2 particles per cell) comes from the case file; the strips
 are regenerated at each resolution with their area and second moment matched to the W shapes.
@@ -92,11 +92,11 @@ def run_frame(scene, progress=None):
     """
     from mpi4py import MPI
 
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
 
     t0 = time.perf_counter()
-    s = Solver(scene, MPI.COMM_SELF)
+    s = build_solver(scene, MPI.COMM_SELF)
     tracks = [tr for tr in scene.output.track if tr.name == TRACK]
     tr = Tracker(tracks, s)
     setup = time.perf_counter() - t0

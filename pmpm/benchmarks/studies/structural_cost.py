@@ -33,10 +33,10 @@ def _scenes():
 
 def _cpu_per_step(scene, steps, every):
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.results.recorder import StructuralRecorder
-    s = Solver(scene, MPI.COMM_SELF)
-    rec = StructuralRecorder(s) if (s.sections or s.reactions is not None) else None
+    s = build_solver(scene, MPI.COMM_SELF)
+    rec = StructuralRecorder(s) if (s.effect("sections") or s.effect("reactions") is not None) else None
     for _ in range(20):
         s.step()
     c0 = time.process_time()
@@ -51,8 +51,8 @@ def kernel_timing(calls=2000, repeat=5):
     """Best-of-``repeat`` seconds per grid-update call on the frame's window: (without, with)."""
     from mpi4py import MPI
     from pmpm.core import kernels as K
-    from pmpm.core.solver import Solver
-    s = Solver(_scenes()[0], MPI.COMM_SELF)
+    from pmpm.build import build_solver
+    s = build_solver(_scenes()[0], MPI.COMM_SELF)
     for _ in range(5):
         s.step()
     w = s.window
@@ -67,8 +67,8 @@ def kernel_timing(calls=2000, repeat=5):
                               None, s._owned_local, react)
             out = min(out, (time.perf_counter() - c0) / calls)
         return out
-    best(None), best(s.reactions.kernel_arg())  # compiled and warm
-    return min(best(None), best(None)), best(s.reactions.kernel_arg()), w.shape
+    best(None), best(s.effect("reactions").kernel_arg())  # compiled and warm
+    return min(best(None), best(None)), best(s.effect("reactions").kernel_arg()), w.shape
 
 
 def main(argv=None):
@@ -83,10 +83,10 @@ def main(argv=None):
               f"with reactions {with_ * 1e6:.1f} us (best of {args.repeat} x 2000 calls)")
         return 0
     from mpi4py import MPI
-    from pmpm.core.solver import Solver
+    from pmpm.build import build_solver
     from pmpm.results.recorder import StructuralRecorder
     base, plain = _scenes()
-    s = Solver(base, MPI.COMM_SELF)
+    s = build_solver(base, MPI.COMM_SELF)
     every = max(1, int(round(base.output.history_interval / s.dt)))
     times = {"without": [], "with": []}
     for _ in range(args.repeat):
@@ -102,7 +102,7 @@ def main(argv=None):
           f"with {lo['with']:.3f} ms (ratio {lo['with'] / lo['without']:.4f}); ranges: without "
           f"{min(times['without']) * 1e3:.3f}-{max(times['without']) * 1e3:.3f} ms, with "
           f"{min(times['with']) * 1e3:.3f}-{max(times['with']) * 1e3:.3f} ms")
-    print(f"one sample ({len(s.sections)} cuts + {len(s.reactions.names)} reactions, one allreduce): "
+    print(f"one sample ({len(s.effect("sections"))} cuts + {len(s.effect("reactions").names)} reactions, one allreduce): "
           f"{sample * 1e6:.1f} us CPU")
     return 0
 

@@ -12,7 +12,12 @@ import math
 
 import numpy as np
 
+from pmpm.core.effects import register_energy
 from pmpm.errors import ConfigError
+
+#: the energy a plastic material dissipates (J): its per-particle field ``plastic_work`` (J/m^3)
+#: integrated over the volume, a part of the internal work
+PLASTIC_WORK = register_energy("plastic_work", "plastic work, dissipated", outside=False)
 
 __all__ = ["Material", "KinematicHardening", "Params", "FORMULATIONS"]
 logger = logging.getLogger(__name__)

@@ -47,7 +47,7 @@ def test_column_loss_same_answer_on_one_and_several_ranks():
     scene = load_scene(os.path.join(ROOT, "cases", "hard", "column_loss.toml"), overrides=SHORT)[0]
     par = run_case(scene, comm, sample_every=5)
     fields = gather_particles(par.solver)
-    removed = comm.allreduce(par.solver.removed_energy)
+    removed = comm.allreduce(par.solver.effects.energy("removed_energy"))
     problems = []
     if comm.rank == 0:
         try:
@@ -63,8 +63,8 @@ def test_column_loss_same_answer_on_one_and_several_ranks():
                 pairs["tracks"] = (par.tracks, ref.tracks)
                 problems += [f"{k}: relative difference {e:.3g}" for k, e in
                              ((k, _relative(a, b)) for k, (a, b) in pairs.items()) if not e <= RTOL]
-                if not abs(removed - ref.solver.removed_energy) <= RTOL * abs(ref.solver.removed_energy):
-                    problems.append(f"removed energy {removed} vs {ref.solver.removed_energy}")
+                if not abs(removed - ref.solver.effects.energy("removed_energy")) <= RTOL * abs(ref.solver.effects.energy("removed_energy")):
+                    problems.append(f"removed energy {removed} vs {ref.solver.effects.energy("removed_energy")}")
                 if len(fields["id"]) >= par.solver.n_total:
                     problems.append("no particle was removed")
         except Exception as exc:  # reported on every rank below
