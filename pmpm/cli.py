@@ -252,7 +252,7 @@ def run_case(args):
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",
                      EXIT_BAD_INPUT) if rank == 0 else EXIT_BAD_INPUT
     install_abort_hook(comm)
-    from pmpm.run import Run
+    from pmpm.runner import Run
     paths = []
     for scene in scenes:
         try:

@@ -105,7 +105,7 @@ class FrameRun:
     def _run(self, steps, clock):
         import os
         from mpi4py import MPI
-        from pmpm.run import Run
+        from pmpm.runner import Run
         from pmpm.scene.config import load_scene
         cwd = os.getcwd()
         os.chdir(self.tmp)  # the scene's output folder is relative to the working directory

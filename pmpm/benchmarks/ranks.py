@@ -1,7 +1,7 @@
 """``pmpm bench ranks``: the main job on one rank and on two, idle and under a background load.
 
 The main job is ``mpirun -n 2 --bind-to core pmpm cases/portal_frame.toml``. This benchmark
-runs its elastic variant for ``--steps`` steps as that command runs it (``pmpm.run.Run`` with
+runs its elastic variant for ``--steps`` steps as that command runs it (``pmpm.runner.Run`` with
 its output: frames, histories, tracked points, section cuts, reactions, energies and the final
 checkpoint, into a temporary folder), on 1 and on 2 ranks, each launched by ``mpirun``
 itself, ``--repeat`` times in turn (1, 2, 1, 2, ...), and prints the median wall time of the
@@ -160,7 +160,7 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
                           phases=comm.gather(phases), particles=comm.gather(s.particles.n))
         else:
             if mode == "run":
-                from pmpm.run import Run
+                from pmpm.runner import Run
                 run = Run(scene, comm)
                 go = run.execute
             else:

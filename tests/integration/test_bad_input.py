@@ -662,7 +662,7 @@ def test_api_variant_argument_cannot_leave_the_folder(tmp_path, monkeypatch, var
     with pytest.raises(ConfigError, match="variant"):
         pmpm.run(dataclasses.replace(scene, variant=variant) if variant != "" else
                  dataclasses.replace(scene, variant="../../x"), write=True)
-    from pmpm.run import Run
+    from pmpm.runner import Run
     with pytest.raises(ConfigError, match="variant"):
         Run(dataclasses.replace(scene, variant="../../../../name"), write=True)
     assert _tree(tmp_path) == before, "a file was written"

@@ -16,7 +16,7 @@ from pmpm.build import build_solver
 from pmpm.scene.config import apply_overrides, load_scene, parse_scene
 from pmpm.physics.contact import ContactSolver, contact_slots
 from pmpm.errors import ConfigError
-from pmpm.run import Run
+from pmpm.runner import Run
 from pmpm.core.solver import Solver
 
 SELF = MPI.COMM_SELF

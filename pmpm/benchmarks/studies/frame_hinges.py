@@ -54,7 +54,7 @@ def run_factor(factor, outdir, t_end=None):
     from pmpm.io.post import postprocess
     from pmpm.results.hinges import hinge_rows
     from pmpm.results.post import read_tables
-    from pmpm.run import Run
+    from pmpm.runner import Run
     scene = scaled_scene(factor, outdir, t_end)
     summary = Run(scene, MPI.COMM_SELF).execute()
     postprocess([scene], [summary["output"]])

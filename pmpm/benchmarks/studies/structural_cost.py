@@ -102,7 +102,7 @@ def main(argv=None):
           f"with {lo['with']:.3f} ms (ratio {lo['with'] / lo['without']:.4f}); ranges: without "
           f"{min(times['without']) * 1e3:.3f}-{max(times['without']) * 1e3:.3f} ms, with "
           f"{min(times['with']) * 1e3:.3f}-{max(times['with']) * 1e3:.3f} ms")
-    print(f"one sample ({len(s.effect("sections"))} cuts + {len(s.effect("reactions").names)} reactions, one allreduce): "
+    print(f"one sample ({len(s.effect('sections'))} cuts + {len(s.effect('reactions').names)} reactions, one allreduce): "
           f"{sample * 1e6:.1f} us CPU")
     return 0
 
