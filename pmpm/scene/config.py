@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from pmpm.errors import ConfigError
+from pmpm.files import read_regular
 from pmpm.physics.materials import make_material
 from pmpm.scene.expressions import parse_expression
 from pmpm.scene.limits import check_memory, check_time_step
@@ -78,6 +79,7 @@ class LoadsConfig:
     forces: tuple
     ground_motion: Optional[dict] = None   # base acceleration record on the fixed nodes
     damping: float = 0.0                   # mass-proportional damping coefficient (1/s)
+    rayleigh: Optional[dict] = None        # {ratio, periods}: Rayleigh damping (pmpm.physics.rayleigh)
 
 
 @dataclass(frozen=True)
@@ -503,7 +505,7 @@ def _loads(root):
         return LoadsConfig(gravity=None, forces=())
     gravity = t.vector("gravity", None)
     ground_motion = _ground_motion(t.table("ground_motion", None))
-    damping = _damping(t)
+    damping, rayleigh = _damping(t)
     forces = []
     for k, f in enumerate(t.tables("forces")):
         forces.append(ForceConfig(
@@ -512,12 +514,28 @@ def _loads(root):
             time_function=parse_time_function(f.table("time_function", {"type": "step"}))))
         f.finish()
     t.finish()
-    return LoadsConfig(gravity=gravity, forces=tuple(forces), ground_motion=ground_motion, damping=damping)
+    return LoadsConfig(gravity=gravity, forces=tuple(forces), ground_motion=ground_motion, damping=damping,
+                       rayleigh=rayleigh)
 
 
 def _damping(t):
-    """``[loads] damping``: a mass-proportional coefficient (1/s)."""
-    return t.number("damping", 0.0, low=0.0, magnitude=MAX_MAGNITUDE)
+    """``[loads] damping``: a mass-proportional coefficient (1/s), or a table
+    ``{ratio = xi, periods = [T1, T2]}`` asking for Rayleigh damping (pmpm.physics.rayleigh).
+    Returns (mass coefficient, Rayleigh dict or None); a ratio of 0 is no damping."""
+    if not isinstance(t.data.get("damping"), dict):
+        return t.number("damping", 0.0, low=0.0, magnitude=MAX_MAGNITUDE), None
+    d = t.table("damping")
+    ratio = d.number("ratio", low=0.0, high=1.0)
+    periods = d.raw("periods")
+    if (not isinstance(periods, list) or len(periods) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                       and 1.0 / MAX_MAGNITUDE <= v <= MAX_MAGNITUDE  # the coefficients stay finite
+                       for v in periods)):
+        raise ConfigError(d.path("periods"), f"must be two periods > 0 in s, [T1, T2] (got {periods!r})")
+    d.finish()
+    if ratio == 0.0:
+        return 0.0, None
+    return 0.0, {"ratio": ratio, "periods": tuple(float(v) for v in periods)}
 
 
 #: objective stress rates of the hypoelastic models (pmpm.core.kernels.objective)
