@@ -278,7 +278,7 @@ MUTATIONS = [
          replacement="    pass  # mutated: no agreement",
          tests=[["tests/unit/test_mpi_failures_do_not_hang.py::test_with_x_a_failure_on_one_rank_stops_every_rank"]],
          why="under mpirun a failure on one rank is not a failure on the others (-x leaves them hanging)"),
-    dict(name="viscous_work_dropped", file="pmpm/core/kernels/damping.py",
+    dict(name="viscous_work_dropped", file="pmpm/physics/rayleigh.py",
          original="        work += vol[p] * (sv[p, 0] * de[p, 0] + sv[p, 1] * de[p, 1] + sv[p, 2] * de[p, 2])",
          replacement="        work += 0.0",
          tests=[["tests/unit/test_damping.py::test_viscous_kernel_matches_its_numpy_twin",
