@@ -5,7 +5,7 @@ Parses every module of ``pmpm`` and ``decomposition`` (ast, nothing is imported)
 2. the import graph has no circle (imports inside functions count as edges too, so none can
    hide a circle),
 3. no function imports a pmpm or decomposition module, except in the entry points (the command
-   line, the Python API, the package's lazy attributes and the kernel warm-up), which defer
+   lines ``pmpm`` and ``pmpm bench``, the Python API, the package's lazy attributes and the kernel warm-up), which defer
    them so that ``pmpm --help`` and scene checks do not pay for numba (their edges are checked
    by 1 and 2 like any other).
 
@@ -31,11 +31,11 @@ LAYERS = [
     ("pmpm.scene", 4),
     ("pmpm.io", 5), ("pmpm.results", 5),
     ("pmpm.build", 6), ("pmpm.stop", 6), ("pmpm.runner", 6),
-    ("pmpm.api", 7), ("pmpm.bench", 7), ("pmpm.warmup", 7),
+    ("pmpm.api", 7), ("pmpm.benchmarks", 7), ("pmpm.warmup", 7),
     ("pmpm.cli", 8), ("pmpm.__main__", 8), ("pmpm", 8),
 ]
 #: modules whose functions may import pmpm modules (lazily, for start-up time: module doc)
-ENTRY_POINTS = {"pmpm", "pmpm.cli", "pmpm.api", "pmpm.warmup", "pmpm.__main__"}
+ENTRY_POINTS = {"pmpm", "pmpm.cli", "pmpm.api", "pmpm.warmup", "pmpm.__main__", "pmpm.benchmarks.cli"}
 
 
 def layer(module):

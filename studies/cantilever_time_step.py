@@ -14,8 +14,8 @@ clamped face's line (x = the body's smallest initial x).
 
 Run::
 
-    python -m pmpm.benchmarks.studies.cantilever_time_step --variant neo_hookean_h0.0625
-    python -m pmpm.benchmarks.studies.cantilever_time_step --variant neo_hookean_h0.0625 \
+    python -m studies.cantilever_time_step --variant neo_hookean_h0.0625
+    python -m studies.cantilever_time_step --variant neo_hookean_h0.0625 \
         --set solver.cfl=0.125
 
 The last line is one JSON object.

@@ -16,9 +16,9 @@ reactions' moments, and the model's hinge times, as docs/structural_results.md q
 
 Run (one rank, 5 to 15 minutes per factor on this shared machine)::
 
-    python -m pmpm.benchmarks.studies.frame_hinges --factors 1.5 2 --out /tmp/frame_hinges \
+    python -m studies.frame_hinges --factors 1.5 2 --out /tmp/frame_hinges \
         --json /tmp/frame_hinges.json
-    python -m pmpm.benchmarks.studies.frame_hinges --factors 1.5 2 --compare /tmp/frame_hinges
+    python -m studies.frame_hinges --factors 1.5 2 --compare /tmp/frame_hinges
 """
 import argparse
 import dataclasses
@@ -29,7 +29,7 @@ import sys
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["scaled_scene", "run_factor", "main"]
 

@@ -7,7 +7,7 @@ solvers in one process, warmed up, then rounds of 200 steps each in turn (the or
 alternating), CPU time per step,
 the median of the rounds. Prints the figures and a final JSON line.
 
-Run: ``python -m pmpm.benchmarks.studies.frame_frontend_cost [--rounds 7]``
+Run: ``python -m studies.frame_frontend_cost [--rounds 7]``
 """
 import argparse
 import json

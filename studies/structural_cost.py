@@ -8,8 +8,8 @@ bookkeeping (the case's two base reactions) and without it.
 
 Run::
 
-    python -m pmpm.benchmarks.studies.structural_cost --steps 1000 --repeat 5
-    python -m pmpm.benchmarks.studies.structural_cost --kernel
+    python -m studies.structural_cost --steps 1000 --repeat 5
+    python -m studies.structural_cost --kernel
 """
 import argparse
 import dataclasses
