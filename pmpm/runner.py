@@ -530,8 +530,7 @@ class Run:
             out.append("deformation gradient F per particle")
         out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
         out += s.transfer.describe()
-        if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
-            out += s.describe()
+        out += s.grid_fields.describe()   # contact
         return out
 
     def execute(self):
