@@ -81,7 +81,7 @@ BAR_CELLS = (10, 20, 40, 80, 160)
 BAR_CELLS_QUICK = BAR_CELLS
 
 # -- the frame (cases/portal_frame.toml, variant "elastic") -----------------------------------
-FRAME_CASE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "cases", "portal_frame.toml")
+FRAME_CASE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "cases", "portal_frame.toml")
 FRAME_DOMAIN = ((-0.5, 0.0), (6.6, 4.2))
 FRAME_T_END = 0.026        # s; the first peak comes at 0.019-0.023 s
 FRAME_SAMPLE = 5e-5        # s between samples of the joint displacement

@@ -36,8 +36,8 @@ import numpy as np
 
 from studies import verification_models
 
-CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.abspath(__file__))))), "cases", "hard", "cantilever_large_rotation.toml")
+CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cases", "hard",
+                    "cantilever_large_rotation.toml")
 MATERIALS = ("neo_hookean", "linear_elastic")
 CELL_SIZES = ("0.25", "0.125", "0.0625")
 FE_CURVE = os.path.join(os.path.dirname(CASE), "data", "cantilever_fe_corner.csv")

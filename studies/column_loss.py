@@ -47,7 +47,7 @@ import numpy as np
 
 __all__ = ["run_cell", "summarise", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "hard", "column_loss.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "hard", "column_loss.toml")
 TRACK = "above_removed"
 CUTS = ("beam_mid_left", "beam_left_end")
 EXTENT = (13.2, 4.2)    # the case's grid: 264 x 84 cells of 0.05 m

@@ -54,7 +54,7 @@ from studies import verification_models
 __all__ = ["frame_model", "continuum_reference", "mode_pattern", "with_joint_forces", "scene_at", "run_cell", "fit_periods", "compare",
            "compare_mode", "main"]
 
-_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 CASE = os.path.join(_ROOT, "cases", "frame_3storey.toml")
 #: the tracked left joints of floors 2, 3 and the roof (frame node names)
 JOINTS = ("c0_f1", "c0_f2", "c0_f3")

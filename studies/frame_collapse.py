@@ -34,7 +34,7 @@ import time
 
 __all__ = ["collapse_scene", "run_collapse", "study", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "hard", "frame_collapse.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "hard", "frame_collapse.toml")
 TRACK = "upper_left_joint"
 #: the issue's measure of collapse: drift past 10% of the column height (centre line, 3.658 m)
 DRIFT_RATIO = 0.10

@@ -17,7 +17,7 @@ import time
 
 __all__ = ["main"]
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 SCENES = {"frame": os.path.join(ROOT, "cases", "portal_frame.toml"),
           "handwritten": os.path.join(ROOT, "tests", "verification", "portal_frame_handwritten.toml")}
 

@@ -33,7 +33,7 @@ from studies import verification_models
 
 __all__ = ["scaled_scene", "run_factor", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 
 
 def scaled_scene(factor, outdir, t_end=None, case=CASE):

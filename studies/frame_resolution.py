@@ -50,7 +50,7 @@ __all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", 
            "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile",
            "analyse_histories", "sway_extrema"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 DOMAIN_LO = (-0.5, 0.0)
 DOMAIN_HI = (6.6, 4.2)
 VARIANTS = ("elastic", "elastoplastic")

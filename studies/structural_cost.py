@@ -19,7 +19,7 @@ import time
 
 __all__ = ["main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 
 
 def _scenes():

@@ -69,7 +69,8 @@ def add_bench_parser(sub):
     ranks_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
     for name, (_module, _entry, text) in REPOSITORY_DRIVERS.items():
         p = bs.add_parser(name, help=f"{text} (from a checkout: module doc)", add_help=False)
-        p.add_argument("driver_args", nargs=argparse.REMAINDER)
+        p.add_argument("driver_args", nargs=argparse.REMAINDER,
+                       help=f"the driver's own options (pmpm bench {name} --help lists them)")
 
 
 #: subcommands run by the repository's drivers: name -> (module, entry function, help)
