@@ -5,8 +5,8 @@ damping's stable step against its rule's closed form.
 The scene: a cantilever along +x (E = 1e6, rho = 1, nu = 0: wave speed 1000 m/s) clamped by the
 fixed nodes at x <= 0, off the origin in y, started with a velocity close to its first bending
 mode, with Rayleigh damping strong enough that the viscous work is a large share of the energy;
-a block glued to its tip (the same material, sharing grid nodes) is removed by an event half way
-through. Every expected value is written here from the particle fields or the energy columns,
+its root (the first four cells, the same material, sharing grid nodes with the rest) is removed
+by an event half way through. Every expected value is written here from the particle fields or the energy columns,
 not by pmpm's functions (pmpm.core.solver.numerical_loss, pmpm.run.energy_summary).
 
 How each test was shown to fail on its bug (planted by hand, watched fail, restored):
@@ -16,7 +16,10 @@ How each test was shown to fail on its bug (planted by hand, watched fail, resto
 * ``mutate.py --only numerical_loss_drops_viscous`` and ``--only numerical_loss_drops_removed``:
   ``test_the_loss_column_is_initial_plus_external_less_every_term`` fails;
 * ``mutate.py --only released_work_without_viscous_stress`` (the fading body's held-back work
-  without its viscous stress): ``test_balance_closes_across_a_damped_removal`` fails;
+  without its viscous stress): ``test_balance_closes_across_a_damped_removal`` fails (the gap
+  changes by 4% of E0 across the fade, its own spread is 0.9%);
+* ``mutate.py --only event_fades_at_half_rate``: ``test_a_fading_body_passes_its_share_of_stress_and_viscous_stress``
+  fails (tests/unit/test_events.py's check of the factor multiplies a zero stress);
 * ``mutate.py --only rayleigh_step_without_the_limit`` and ``--only rayleigh_undamped_limit_cubic``:
   ``test_the_damped_step_is_the_rules_closed_form`` fails.
 """
@@ -44,17 +47,20 @@ FIELDS = ["x", "v", "m", "vol", "stress"]
 
 
 def _scene(damping=True, event=True, shape="cubic", end=END):
-    tip = [L, L + 2 * H]
+    """The cantilever in two bodies: its root (the first 4 cells, clamped) and the rest; the
+    event removes the root, where the bending strain and its rate (so the viscous stress) are
+    largest, and lets the rest fly off."""
+    v = [0.0, f"0.05 * (x / {L})**2"]
     sc = {"particles_per_cell": 2,
           "grid": {"origin": [-2 * H, Y0 - 0.2], "cell_size": H, "cells": [int(round((L + 5 * H) / H)), 16]},
           "materials": {"m": {"type": "linear_elastic", "E": E, "nu": 0.0, "density": RHO}},
-          "bodies": [{"name": "beam", "shape": "rectangle", "material": "m", "lower": [0, Y0 - D / 2],
-                      "upper": [L, Y0 + D / 2], "velocity": [0.0, f"0.05 * (x / {L})**2"]},
-                     {"name": "tip", "shape": "rectangle", "material": "m", "lower": [tip[0], Y0 - D / 2],
-                      "upper": [tip[1], Y0 + D / 2], "velocity": [0.0, 0.05]}],
+          "bodies": [{"name": "root", "shape": "rectangle", "material": "m", "lower": [0, Y0 - D / 2],
+                      "upper": [4 * H, Y0 + D / 2], "velocity": v},
+                     {"name": "beam", "shape": "rectangle", "material": "m", "lower": [4 * H, Y0 - D / 2],
+                      "upper": [L, Y0 + D / 2], "velocity": v}],
           "boundary": [{"type": "fixed", "lower": [-2 * H, Y0 - 0.2], "upper": [0.0, Y0 + 0.2]}],
           "loads": {"damping": {"ratio": RATIO, "periods": PERIODS}} if damping else {},
-          "events": [{"type": "remove", "body": "tip", "time": EVENT_T, "duration": EVENT_DT}] if event else [],
+          "events": [{"type": "remove", "body": "root", "time": EVENT_T, "duration": EVENT_DT}] if event else [],
           "solver": {"end_time": end, "cfl": 0.5, "shape_function": shape},
           "output": {"history_interval": 2e-4, "interval": 2e-3, "fields": FIELDS,
                      "track": [{"name": "end", "point": [L, Y0]}]}}
@@ -110,10 +116,10 @@ def test_the_summary_share_is_the_loss_over_initial_plus_external(damped, caplog
 
 def test_balance_closes_across_a_damped_removal(damped):
     """kinetic + internal work + damping works + removed energy - external work stays the initial
-    energy: across the fade (where the held-back work includes the viscous stress the fading
-    body passed on) the gap changes by less than its own spread before the event (the explicit
-    step's O(dt) mismatch of force stress and trapezoid internal work, the same over any window
-    of the run), while the viscous work held back in the fade is several times that spread."""
+    energy: across the fade (where the work held back includes the viscous stress the fading
+    root passed on, about 4% of E0 here) the gap changes by less than its own spread before the
+    event (the explicit step's O(dt) mismatch of force stress and trapezoid internal work, the
+    same over any window of the run), and over the run it stays within the issue's 2% of E0."""
     e = {k: _col(damped, k) for k in ("time", "kinetic", "internal_work", "damping_work",
                                       "viscous_damping_work", "removed_energy", "external_work")}
     t = e["time"]
@@ -123,12 +129,27 @@ def test_balance_closes_across_a_damped_removal(damped):
     before = t < EVENT_T
     window = (t >= EVENT_T - 1e-12) & (t <= EVENT_T + EVENT_DT + 1e-3)
     own = np.ptp(gap[before])
-    assert np.ptp(gap[window]) < own + 1e-9 * e0
-    assert np.abs(gap).max() < 0.02 * e0   # the issue's 2 %
-    undamped = pmpm.run(_scene(damping=False), dataframes=False)
-    # the fade of the damped run holds back what the undamped one does plus the viscous part:
-    # the removed energies differ by much more than the spread allowed above
-    assert abs(_col(undamped, "removed_energy")[-1] - e["removed_energy"][-1]) > 3 * own
+    assert np.ptp(gap[window]) < own
+    assert np.abs(gap).max() < 0.02 * e0
+    assert abs(e["removed_energy"][-1]) > 10 * own   # without it the balance would be off by all of it
+
+
+def test_a_fading_body_passes_its_share_of_stress_and_viscous_stress():
+    """While the root fades, the stress its particles pass to the grid is s (sigma + sigma_v),
+    s = 1 - (t - time) / duration (docs/scenes.md [[events]]), the other bodies' sigma + sigma_v;
+    with the particles' stress and viscous stress set to values off zero (at the start both are
+    zero, where any factor passes). Round-off only."""
+    s = Solver(parse_scene(_scene()), MPI.COMM_SELF)
+    p = s.particles
+    rng = np.random.default_rng(38)
+    p["stress"][...] = rng.normal(size=p["stress"].shape)
+    p["viscous_stress"][...] = rng.normal(size=p["viscous_stress"].shape)
+    s.t = EVENT_T + 0.3 * EVENT_DT
+    root = p["body"] == 0
+    both = p["stress"][:, :3] + p["viscous_stress"]
+    f = s.force_stress()
+    np.testing.assert_allclose(f[root], 0.7 * both[root], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(f[~root], both[~root], rtol=1e-13, atol=1e-15)
 
 
 @pytest.mark.parametrize("shape,limit", [("cubic", 2.5), ("quadratic", 2.25), ("linear", 1.65)])
