@@ -10,6 +10,8 @@ How each test was shown to fail on its bug (planted, watched fail, restored):
   ``test_a_weak_axis_strip_is_the_section_turned`` fails;
 * ``mutate.py --only section_spacing_axes_swapped``: the spacing along a cut's normal taken
   from the step across the strip: ``test_i_section_cut_forces_are_the_band_integral`` fails;
+* ``mutate.py --only held_particles_momentum_not_counted``: ``test_a_held_face_under_a_moving_body_reacts_with_its_momentum_balance``
+  fails;
 * ``mutate.py --only held_face_moment_sign``: the constraint impulses' moment with the wrong
   sign of its y x Jx term: ``test_held_faces_react_with_minus_the_loads_and_their_moment`` fails.
 """
@@ -210,3 +212,40 @@ def test_held_faces_react_with_minus_the_loads_and_their_moment():
     scale = np.abs(want).max()
     np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=0, atol=1e-9 * scale)
     assert abs(want[0]) > 10.0 and abs(want[2]) > 10.0
+
+
+def test_a_held_face_under_a_moving_body_reacts_with_its_momentum_balance():
+    """A cantilever held by a support on its left face (the rest free to swing), under gravity
+    with a horizontal part and a sideways tip force: FLIP moves momentum between particles and
+    grid exactly and internal forces sum to zero, so over each history interval the body's
+    momentum changes by the loads' impulse plus the support's, R dt = P(t_k) - P(t_k-1) - (W + F)
+    dt, with P = sum m v summed here from the frames (one per interval). The support's impulse is
+    both the constraint's on the nodes and the momentum the held particles' velocities lose
+    (pmpm/physics/supports.py); each is large here. Tolerance: round-off (1e-9 of the scale)."""
+    g = np.array([1.5, -9.81])
+    F = np.array([-40.0, -25.0])
+    dt_h = 0.004
+    res = pmpm.run({
+        "particles_per_cell": 2,
+        "grid": {"origin": [1.4, -2.2], "cell_size": H, "cells": [16, 10]},
+        "materials": {"m": {"type": "linear_elastic", "E": 2e5, "nu": 0.3, "density": 500.0}},
+        "bodies": [{"name": "beam", "shape": "rectangle", "material": "m", "lower": [1.85, -1.9], "upper": [2.85, -1.7]}],
+        "boundary": [{"name": "held", "type": "fixed", "body": "beam", "face": "left", "reaction": True,
+                      "moment_about": [2.0, -1.3]}],
+        "loads": {"gravity": list(g), "forces": [{"name": "tip", "lower": [2.75, -1.9], "upper": [2.85, -1.7],
+                                                  "force": list(F)}]},
+        "solver": {"end_time": 0.04, "cfl": 0.5},
+        "output": {"interval": dt_h, "history_interval": dt_h, "fields": ["x", "v", "m"]},
+    }, dataframes=False)
+    m, v = res.frames["m"], res.frames["v"]
+    P = np.einsum("fp,fpd->fd", m, v)
+    W = m[0].sum() * g
+    R = res.reactions["held"]
+    rt = np.asarray(R["time"])
+    np.testing.assert_allclose(rt, res.frame_times, rtol=0, atol=1e-12)
+    dt = np.diff(res.frame_times)
+    want = np.diff(P, axis=0) / dt[:, None] - (W + F)
+    got = np.column_stack([R["Rx"], R["Ry"]])[1:]
+    scale = np.abs(W + F).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * scale)
+    assert np.abs(np.diff(P, axis=0) / dt[:, None]).max() > 0.1 * scale   # the body accelerates
