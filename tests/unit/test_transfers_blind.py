@@ -6,7 +6,7 @@ How each test was shown to fail on its bug (planted, watched fail, restored):
 * ``mutate.py --only xpic_smoothing_drops_the_boundary``: the smoothing pass returns M u without
   the boundary values: ``test_xpic_keeps_a_moving_boundarys_velocity`` fails;
 * ``mutate.py --only apic_usf_skips_the_force_pass``: ``test_apic_under_usf_runs_the_bar`` fails
-  (the run stops as unstable: nothing moves the material back);
+  (no internal force reaches the grid: the bar never swings back);
 * ``mutate.py --only waiting_timer_slack_unset`` and ``--only waiting_timer_slack_value``:
   ``test_the_first_nap_sets_a_fine_timer_slack`` fails.
 """
