@@ -266,9 +266,11 @@ class Run:
         foreign = None
         if self.rank == 0 and bad is None:
             # every file the run and its post-processing may write over: pmpm's own or refused
-            from pmpm.io.ownership import ForeignFileError, check_owned
+            from pmpm.io.ownership import ForeignFileError, check_manifest, check_owned, protect_input
             from pmpm.scene.names import run_files
+            protect_input(self.scene.path)  # the gate never writes the scene, under any name
             try:
+                check_manifest(self.scene.output.directory)  # its schema, before anything is written
                 for _key, name in run_files(self.scene):
                     check_owned(os.path.join(self.scene.output.directory, name), self.scene.stem)
             except ForeignFileError as exc:

@@ -28,7 +28,8 @@ import tempfile
 from pmpm.errors import ConfigError
 
 __all__ = ["OWNER_ATTR", "MANIFEST", "ForeignFileError", "check_owned", "hdf5_owner",
-           "xdmf_marker", "writing", "claim", "remove_owned"]
+           "xdmf_marker", "writing", "claim", "remove_owned", "protect_input", "check_target",
+           "exclusive_temp", "replace_into", "check_manifest"]
 
 #: root attribute of every HDF5 file pmpm writes: the stem of the scene file
 OWNER_ATTR = "pmpm_owner"
@@ -113,9 +114,18 @@ def _load_manifest(folder):
             raise ValueError("another format")
         files = {k: v for k, v in data["files"].items()
                  if isinstance(k, str) and isinstance(v, dict) and isinstance(v.get("sha256"), str)}
-    except (OSError, ValueError, UnicodeDecodeError):
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        # RecursionError: JSON nested thousands deep (json.loads recurses per level)
         raise _foreign(path, "is not pmpm's manifest of the files it wrote") from None
     return files
+
+
+def check_manifest(folder):
+    """Validate ``folder``'s manifest (if any) as pmpm's schema, before a run writes anything
+    into the folder: ForeignFileError (one line) for garbage, deep nesting, a folder, a link,
+    a FIFO, a huge file or another format."""
+    if os.path.isdir(folder):
+        _load_manifest(folder)
 
 
 def _save_manifest(folder, files):
@@ -140,6 +150,112 @@ def _foreign(path, why):
     return ForeignFileError(path, f"exists and {why}: pmpm overwrites or deletes only the files "
                                   f"it wrote for this scene (move it, or choose another output folder)")
 
+# -- the gate: the checks every path pmpm writes passes, whoever wrote the file before ---------
+
+#: (st_dev, st_ino) of this process's input files (the scene): never written, under any name
+_PROTECTED = set()
+
+
+def protect_input(path):
+    """Remember ``path`` (an input: the scene file) so that no write of this process lands on
+    it under any other name: a symbolic or hard link, a path through a linked folder (same
+    device and inode)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError, TypeError):  # no file (a Scene built in Python): nothing to guard
+        return
+    _PROTECTED.add((st.st_dev, st.st_ino))
+
+
+def _is_protected(path):
+    try:
+        st = os.stat(path)  # followed: a link to the scene is the scene
+    except (OSError, ValueError):
+        return False
+    return (st.st_dev, st.st_ino) in _PROTECTED
+
+
+def check_target(path, root=None):
+    """The gate: raise :class:`ForeignFileError` naming ``path`` unless pmpm may create or
+    replace it as far as the file system goes (ownership aside, see :func:`check_owned`).
+
+    Refused: a symbolic link at ``path`` or at any folder between ``root`` (the output folder,
+    taken as given: the user chose it) and ``path``; a special file (FIFO, device, socket) or
+    a folder at ``path``; an input of this run (the scene) under any name.
+
+    Parameters
+    ----------
+    path : str
+        The file about to be written.
+    root : str, optional
+        The output folder ``path`` lies in (default: its own folder, so only ``path`` itself
+        is checked for a link).
+    """
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    root = os.path.abspath(root) if root is not None else folder
+    # every component below root, outermost first, the file last
+    between = []
+    probe = folder
+    while probe != root and probe.startswith(root + os.sep):
+        between.append(probe)
+        probe = os.path.dirname(probe)
+    for step in reversed(between):
+        if os.path.islink(step):
+            raise ForeignFileError(step, "is a symbolic link on the way to an output file: pmpm "
+                                         "writes only inside the output folder, never through a link")
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise ForeignFileError(path, f"cannot be checked ({exc.strerror or type(exc).__name__})") from None
+    if st is not None:
+        if stat.S_ISLNK(st.st_mode):
+            raise ForeignFileError(path, "is a symbolic link: pmpm never writes through a link "
+                                         "(move it, or choose another output folder)")
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a special file (FIFO, device or socket)"
+            raise ForeignFileError(path, f"is {kind}, not a file pmpm wrote")
+    if _is_protected(path):
+        raise ForeignFileError(path, "is an input of this run (the scene file under another name): "
+                                     "pmpm never writes over its input")
+
+
+def exclusive_temp(path, binary=True):
+    """Create a new temporary file beside ``path`` and return ``(file object, temp path)``.
+
+    The name is fresh and created exclusively (``O_CREAT | O_EXCL | O_NOFOLLOW``, by
+    :func:`tempfile.mkstemp`), so no existing file, link or FIFO is ever opened, whatever sits
+    at ``<path>.tmp``. Its mode is what a plain ``open()`` would give (mkstemp makes 0600)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".pmpm-tmp", dir=folder)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    return os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8"})), tmp
+
+
+def replace_into(path, write, binary=False, root=None):
+    """Write a whole file through the gate: ``path`` checked (:func:`check_target`), the
+    content written by ``write(fh)`` into an exclusive temporary beside it, flushed to disk,
+    then renamed over ``path``. A failure (a full disk) removes the temporary and leaves the
+    old file intact."""
+    check_target(path, root)
+    fh, tmp = exclusive_temp(path, binary)
+    try:
+        with fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        check_target(path, root)  # again: nothing was put there meanwhile
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise
+    return path
+
 
 def check_owned(path, owner):
     """Raise :class:`ForeignFileError` unless ``path`` is missing or pmpm's file of ``owner``.
@@ -153,8 +269,7 @@ def check_owned(path, owner):
     """
     if not os.path.lexists(path):
         return
-    if not _regular(path):
-        raise _foreign(path, "is not a regular file (a link, a folder or a device)")
+    check_target(path)  # a link, a special file or the scene: refused whatever it holds
     name = os.path.basename(path)
     if name.endswith(_HDF5_SUFFIXES):
         found = hdf5_owner(path)
@@ -208,12 +323,14 @@ class Writes:
         self.made += [m for m in reversed(missing) if m not in self.made]
         return folder
 
-    def claim(self, path):
-        """Check ``path`` (ForeignFileError if it is not ours) and set any old copy aside."""
+    def claim(self, path, root=None):
+        """Check ``path`` (ForeignFileError if it is not ours; :func:`check_target` below
+        ``root``) and set any old copy aside."""
         path = os.fspath(path)
         if path in self.paths:
             return path
         folder = os.path.dirname(os.path.abspath(path))
+        check_target(path, root)
         if os.path.isdir(folder):
             _load_manifest(folder)  # a foreign manifest is refused before anything is written
         check_owned(path, self.owner)
@@ -282,8 +399,9 @@ def writing(owner):
         _ACTIVE.pop()
 
 
-def claim(path):
-    """Claim ``path`` in the active :func:`writing` context (which must exist); returns it."""
+def claim(path, root=None):
+    """Claim ``path`` in the active :func:`writing` context (which must exist); returns it.
+    ``root``: the output folder, below which no folder on the way may be a link."""
     if not _ACTIVE:
         raise RuntimeError("pmpm.io.ownership.claim outside a writing() context")
-    return _ACTIVE[-1].claim(path)
+    return _ACTIVE[-1].claim(path, root)
