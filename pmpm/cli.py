@@ -251,6 +251,10 @@ def run_case(args):
             print(f"{args.case}: valid ({len(scenes)} run(s))")
             for line in _frame_report(args):
                 print(line)
+            from pmpm.scene.setup_particles import load_box_report
+            for scene in scenes:  # a load box that catches several bodies is said, not refused
+                for line in load_box_report(scene):
+                    print(line)
         return 0
     if args.restart and len(scenes) > 1:
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",

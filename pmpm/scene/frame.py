@@ -19,7 +19,7 @@ in docs/scenes.md, "Frames"; in short:
   Ry, M about the node) is recorded under the node's name;
 * a nodal load acts on the particles of the node's panel (column depth by beam depth),
   shared by mass; a member's ``load_per_length`` (N/m, times the node-to-node length) on the
-  particles of its clear length;
+  particles of its clear length, of that member's body only (``body = "<member>"``);
 * two section cuts per member, named ``<member>_<node>``, at ``cut_offset`` from each clear
   end; a tracked point per node, named after it;
 * a nodal mass is added to the joint panel of the column under the node, split off as its own
@@ -315,8 +315,10 @@ def _member_loads(members, geo, nodes, tol):
         c0, c1 = g["clear"]
         if m.vertical:
             y0, y1 = c0, c1
-        # strictly inside the clear part: the panels' particles belong to the nodal loads
-        out.append({"name": f"{m.name}_line_load", "lower": [x0 + tol, y0 + tol], "upper": [x1 - tol, y1 - tol],
+        # its member's particles only (`body`: never a neighbour the box touches), strictly
+        # inside the clear part: the panels' particles belong to the nodal loads
+        out.append({"name": f"{m.name}_line_load", "body": m.name,
+                    "lower": [x0 + tol, y0 + tol], "upper": [x1 - tol, y1 - tol],
                     "force": [m.load[0] * length, m.load[1] * length], "time_function": m.load_tf})
     return out
 
