@@ -145,7 +145,12 @@ def _text(value):
     return value.decode("utf-8", "replace") if isinstance(value, bytes) else value
 
 
-def _integer(attrs, name, where, low=0):
+#: largest step number a checkpoint may carry: exactly representable as a double (the step
+#: is written through JSON too) and far beyond any run's solver.max_estimated_steps
+MAX_STEP = 2 ** 53
+
+
+def _integer(attrs, name, where, low=0, high=None):
     value = attrs.get(name)
     if isinstance(value, np.ndarray) and value.shape == ():
         value = value[()]
@@ -156,6 +161,8 @@ def _integer(attrs, name, where, low=0):
             raise ValueError(f"{where} attribute '{name}' is missing or not an integer")
     if value < low:
         raise ValueError(f"{where} attribute '{name}' is below {low}")
+    if high is not None and value > high:
+        raise ValueError(f"{where} attribute '{name}' is above {high}")
     return int(value)
 
 
@@ -284,10 +291,11 @@ def check_checkpoint_schema(f, layout):
     if not bool(f.attrs.get("complete", False)):
         raise ValueError("cut short (not marked complete)")
     n = _integer(f.attrs, "n_total", "the root")
-    _integer(f.attrs, "step", "the root")
+    step = _integer(f.attrs, "step", "the root", high=MAX_STEP)
     t = f.attrs.get("time")
-    if not isinstance(t, (float, int, np.floating, np.integer)) or isinstance(t, (bool, np.bool_)):
-        raise ValueError("the root attribute 'time' is missing or not a number")
+    if not isinstance(t, (float, int, np.floating, np.integer)) or isinstance(t, (bool, np.bool_)) \
+            or not np.isfinite(t) or t < 0:
+        raise ValueError("the root attribute 'time' is missing or not a finite number >= 0")
     raw = _text(f.attrs.get("attrs"))
     try:
         attrs = json.loads(raw) if isinstance(raw, str) else None
@@ -295,6 +303,8 @@ def check_checkpoint_schema(f, layout):
         attrs = None
     if not isinstance(attrs, dict):
         raise ValueError("the root attribute 'attrs' is not a JSON table")
+    if attrs.get("step", step) != step or attrs.get("time", float(t)) != float(t):
+        raise ValueError("its step or time disagree between the root and 'attrs'")
     if attrs.get("n_total") != n:
         raise ValueError(f"its counts of particle ids disagree (root {n}, attrs {attrs.get('n_total')!r})")
     particles = _group(f, "particles")

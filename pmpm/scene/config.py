@@ -18,7 +18,8 @@ import numpy as np
 from pmpm.errors import ConfigError
 from pmpm.physics.materials import make_material
 from pmpm.scene.expressions import parse_expression
-from pmpm.scene.limits import check_memory, check_time_step
+from pmpm.scene.limits import (MAX_XPIC_ORDER, check_memory, check_override_depth, check_time_step,
+                               check_work_bounds)
 from pmpm.scene.names import check_name, check_output_directory, check_output_files
 from pmpm.scene.tables import MAX_MAGNITUDE, REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
@@ -626,7 +627,7 @@ def _solver(t):
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
         allow_unstable_time_step=t.boolean("allow_unstable_time_step", False),
         transfer=t.string("transfer", "flip", choices=TRANSFERS),
-        xpic_order=t.integer("xpic_order", 2, low=1))
+        xpic_order=t.integer("xpic_order", 2, low=1, high=MAX_XPIC_ORDER))
     if t.has("xpic_order") and s.transfer != "xpic":
         raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
     if s.transfer == "xpic":
@@ -821,6 +822,7 @@ def parse_scene(data, path="<scene>"):
         scene = dataclasses.replace(scene, output=dataclasses.replace(scene.output, directory=f"{stem}_results"))
     root.finish()
     _check_velocity_values(scene.bodies, scene.grid)
+    check_work_bounds(scene)  # frames, rows, checkpoints, orders, thicknesses the run can afford
     built = [make_material(materials[k], f"materials.{k}", formulation) for k in materials]
     check_time_step(scene, built)
     # what no rank count can shrink (every rank places all points and holds a window at
@@ -832,6 +834,7 @@ def parse_scene(data, path="<scene>"):
 def apply_overrides(data, overrides, where):
     """Copy of TOML ``data`` with dotted-key ``overrides`` (``"materials.steel.type" = ...``)."""
     import copy
+    check_override_depth(overrides, where)  # before _flatten and deepcopy recurse into it
     data = copy.deepcopy(data)
     for dotted, value in _flatten(overrides):
         node = data
