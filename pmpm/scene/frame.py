@@ -429,6 +429,7 @@ def expand_frame(data):
     """
     if "frame" not in data:
         return data
+    _check_lists_of_tables(data)  # before any of them is iterated or merged with the frame's
     grid, t, materials = _read(data)
     tol = 1e-6 * grid.cell_size
     default_material = t.string("material", None)
@@ -468,6 +469,27 @@ def expand_frame(data):
     output["track"] = tracks + list(output.get("track", []))
     _check_names(out, "frame")
     return out
+
+
+#: the scene's own lists the frame's generated entries are put in front of
+MERGED_LISTS = ("bodies", "boundary", "loads.forces", "output.section", "output.track")
+
+
+def _check_lists_of_tables(data):
+    """Each of :data:`MERGED_LISTS` the scene gives must be a list of tables (``[[bodies]]``):
+    a number, a boolean, a string or a list holding one is refused naming the entry."""
+    for key in MERGED_LISTS:
+        node = data
+        for part in key.split(".")[:-1]:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or key.split(".")[-1] not in node:
+            continue
+        value = node[key.split(".")[-1]]
+        if not isinstance(value, list):
+            raise ConfigError(key, f"must be a list of tables ([[{key}]]), not {type(value).__name__}")
+        for k, item in enumerate(value):
+            if not isinstance(item, dict):
+                raise ConfigError(f"{key}[{k}]", f"must be a table ([[{key}]]), not {type(item).__name__}")
 
 
 def frame_report(data):

@@ -186,3 +186,52 @@ def test_expand_refuses_a_fifo_and_writes_atomically(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "[[bodies]]" in (tmp_path / "old.toml").read_text()
     assert not [n for n in os.listdir(tmp_path) if n.endswith(".pmpm-tmp")]
+
+
+# -- one line, exit 2, before anything is written (issue 35: these printed tracebacks) ----------
+
+@pytest.mark.parametrize("kind", ["missing_column", "not_a_number", "binary", "dev_zero", "folder",
+                                  "missing", "fifo", "outdir_is_a_file"])
+def test_accuracy_from_csv_bad_inputs_are_one_line(tmp_path, kind):
+    src = tmp_path / "accuracy.csv"
+    _accuracy_csv(src)
+    outdir = tmp_path / "report"
+    text = src.read_text()
+    if kind == "missing_column":
+        src.write_text(text.replace("cell_size,", "", 1))
+    elif kind == "not_a_number":
+        src.write_text(text.replace(",0.5,", ",half,", 1))
+    elif kind == "binary":
+        src.write_bytes(b"\x00\x01\xff\xfe" * 100)
+    elif kind == "dev_zero":
+        src = "/dev/zero"
+    elif kind == "folder":
+        src = tmp_path
+    elif kind == "missing":
+        src = tmp_path / "nothing.csv"
+    elif kind == "fifo":
+        os.remove(src)
+        os.mkfifo(src)
+    else:
+        outdir.write_text("a file\n")
+    r = _pmpm(tmp_path, "bench", "accuracy", "--from-csv", str(src), "--outdir", str(outdir), timeout=120)
+    _one_line(r)
+    assert kind == "outdir_is_a_file" or not outdir.exists()  # nothing written
+
+
+@pytest.mark.parametrize("args", [["--case", "bad.toml"], ["--variant", "no_such_variant"]])
+def test_bench_ranks_bad_scene_or_variant_is_one_line(tmp_path, args):
+    (tmp_path / "bad.toml").write_text("x = \n")
+    r = _pmpm(tmp_path, "bench", "ranks", *args, timeout=120)
+    _one_line(r)
+
+
+def test_a_users_capacity_file_stops_a_pushover_before_it_writes(tmp_path):
+    import shutil
+    shutil.copy(os.path.join(ROOT, "cases", "portal_pushover.toml"), tmp_path)
+    out = tmp_path / "portal_pushover_results"
+    out.mkdir()
+    (out / "portal_pushover_capacity.png").write_bytes(b"the user's plot")
+    r = _pmpm(tmp_path, "portal_pushover.toml", "-q", timeout=300)
+    _one_line(r, "portal_pushover_capacity.png")
+    assert os.listdir(out) == ["portal_pushover_capacity.png"]  # the run wrote nothing
