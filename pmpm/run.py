@@ -59,6 +59,9 @@ RUN_SUFFIXES = (".h5", ".ckpt0.h5", ".ckpt1.h5", ".lastgood.h5")
 def _owner(path):
     """(scene file, variant) that wrote a pmpm HDF5 file, or None if unknown / not ours."""
     import h5py
+    from pmpm.io.validate import safe_to_open_hdf5
+    if not safe_to_open_hdf5(path):  # never opened: a FIFO (would hang), a crashing file
+        return None                  # (check_owned then refuses it in one line)
     try:
         with h5py.File(path, "r") as f:
             if "scene_file" in f.attrs:  # results file

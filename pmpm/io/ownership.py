@@ -26,6 +26,7 @@ import stat
 import tempfile
 
 from pmpm.errors import ConfigError
+from pmpm.io.validate import safe_to_open_hdf5
 
 __all__ = ["OWNER_ATTR", "MANIFEST", "ForeignFileError", "check_owned", "hdf5_owner",
            "xdmf_marker", "writing", "claim", "remove_owned", "protect_input", "check_target",
@@ -70,7 +71,7 @@ def _regular(path):
 
 def hdf5_owner(path):
     """The ``pmpm_owner`` of an HDF5 file, or None (not HDF5, no record, unreadable)."""
-    if not _regular(path):
+    if not safe_to_open_hdf5(path):  # a FIFO, a link, or a file that crashes libhdf5
         return None
     import h5py
     try:

@@ -89,7 +89,8 @@ class Loads:
             sel = select(f, x0, fields["body"])
             if np.any(sel & (load_id >= 0)):
                 other = self.forces[load_id[np.argmax(sel & (load_id >= 0))]].name
-                raise ConfigError(f"loads.forces[{k}]", f"acts on particles force {other!r} does too (a particle takes one set)")
+                raise ConfigError(f"loads.forces[{k}]", f"overlaps force {other!r}: they select the same "
+                                                        f"particles (a particle takes one set)")
             total = allreduce_sum(float(m[sel].sum()))
             if total <= 0:
                 raise ConfigError(f"loads.forces[{k}]", "selects no particle of its bodies" if f.body_ids

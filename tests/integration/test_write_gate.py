@@ -235,3 +235,14 @@ def test_a_users_capacity_file_stops_a_pushover_before_it_writes(tmp_path):
     r = _pmpm(tmp_path, "portal_pushover.toml", "-q", timeout=300)
     _one_line(r, "portal_pushover_capacity.png")
     assert os.listdir(out) == ["portal_pushover_capacity.png"]  # the run wrote nothing
+
+
+@pytest.mark.parametrize("name", ["bar.h5", "bar.ckpt1.h5"])
+def test_a_fifo_at_an_output_name_is_refused_without_hanging(tmp_path, name):
+    (tmp_path / "bar.toml").write_text(BAR)
+    out = tmp_path / "bar_results"
+    out.mkdir()
+    os.mkfifo(out / name)
+    r = _pmpm(tmp_path, "bar.toml", "--no-plots", "-q", timeout=120)  # hung before: h5py opened it
+    _one_line(r, name)
+    assert os.listdir(out) == [name]
