@@ -153,8 +153,10 @@ def _foreign(path, why):
 
 # -- the gate: the checks every path pmpm writes passes, whoever wrote the file before ---------
 
-#: (st_dev, st_ino) of this process's input files (the scene): never written, under any name
-_PROTECTED = set()
+#: (st_dev, st_ino) -> path of this process's input files (the scene): never written, under
+#: any name. The path is kept to tell a live input from a deleted one whose inode the file
+#: system has since given to a new file (a long process runs many scenes).
+_PROTECTED = {}
 
 
 def protect_input(path):
@@ -165,7 +167,7 @@ def protect_input(path):
         st = os.stat(path)
     except (OSError, ValueError, TypeError):  # no file (a Scene built in Python): nothing to guard
         return
-    _PROTECTED.add((st.st_dev, st.st_ino))
+    _PROTECTED[(st.st_dev, st.st_ino)] = os.path.abspath(path)
 
 
 def _is_protected(path):
@@ -173,7 +175,13 @@ def _is_protected(path):
         st = os.stat(path)  # followed: a link to the scene is the scene
     except (OSError, ValueError):
         return False
-    return (st.st_dev, st.st_ino) in _PROTECTED
+    source = _PROTECTED.get((st.st_dev, st.st_ino))
+    if source is None:
+        return False
+    try:  # still the input's inode (not one reused after the input was deleted)
+        return os.path.samefile(source, path)
+    except OSError:
+        return False
 
 
 def check_target(path, root=None):

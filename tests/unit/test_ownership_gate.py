@@ -109,3 +109,17 @@ def test_checkpoint_cut_short_is_absent_not_ownerless(tmp_path, monkeypatch):
     assert not [n for n in os.listdir(tmp_path) if n.endswith(".pmpm-tmp")]
     again = checkpoint.write_checkpoint(base, comm, 0.2, 2, fields, {"pmpm_owner": "case"})
     assert again == second and ownership.hdf5_owner(second) == "case"
+
+
+def test_a_deleted_input_protects_nothing(tmp_path):
+    """A long process (the API, the generated suite) runs many scenes: once a scene file is
+    deleted, its inode may be given to a new output file, which must not be refused."""
+    for k in range(20):  # a few rounds: the file system tends to hand the freed inode back
+        scene = tmp_path / f"s{k}.toml"
+        scene.write_text("x = 1\n")
+        ownership.protect_input(str(scene))
+        os.remove(scene)
+        out = tmp_path / f"out{k}.csv"
+        out.write_text("pmpm's\n")
+        ownership.check_target(str(out))
+    ownership._PROTECTED.clear()
