@@ -63,15 +63,19 @@ def _write_pvd(path, entries):
 
 def _check_vtu_folder(outdir, root):
     """The export folder through the gate, before anything is written: not a link (nor any
-    folder on the way from ``root``), and, if it exists, a folder pmpm made: empty or holding
-    pmpm's manifest (a user's folder of that name is not written into)."""
+    folder on the way from ``root``), and, for the default folder (``root`` given), if it exists,
+    a folder pmpm made: empty or holding pmpm's manifest (a user's folder of that name is not
+    written into)."""
     ownership.check_target(os.path.join(outdir, ownership.MANIFEST), root)
     if os.path.islink(outdir):
         raise ownership.ForeignFileError(outdir, "is a symbolic link: pmpm never writes through a link")
     if os.path.lexists(outdir):
         if not os.path.isdir(outdir):
             raise ownership.ForeignFileError(outdir, "exists and is not a folder")
-        if os.listdir(outdir) and not os.path.lexists(os.path.join(outdir, ownership.MANIFEST)):
+        # the default <stem>_vtu is pmpm's own folder; a folder the user names with -o is theirs
+        # to share (each file in it is still claimed)
+        made_by_pmpm = os.path.lexists(os.path.join(outdir, ownership.MANIFEST))
+        if root is not None and os.listdir(outdir) and not made_by_pmpm:
             raise ownership.ForeignFileError(outdir, "exists and is not a folder pmpm made (it holds files "
                                                      f"but no {ownership.MANIFEST}): move it or give --outdir")
         ownership.check_manifest(outdir)
