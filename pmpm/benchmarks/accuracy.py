@@ -736,7 +736,7 @@ def _sweep(runs, csv_path, log):
         cost = f", wall {row['wall_s']:.2f} s, {row['steps']} steps" if row.get("wall_s") is not None else ""
         print(f"[accuracy] {k + 1}/{len(runs)} {problem} {shape} ppc {ppc} {scheme} h {h:.4g}: {what}{cost}",
               file=log, flush=True)
-        write_csv(rows, csv_path)   # a run that fails keeps the rows before it (a crash of the study takes its files back)
+        write_csv(rows, csv_path)   # a failed run keeps the rows before it (a crash of the study takes its files back)
     return rows
 
 

@@ -51,7 +51,7 @@ def bar_run(tmp_path_factory):
     out.mkdir()
     (tmp / "outside").mkdir()
     (tmp / "outside" / "precious.txt").write_text("the user's\n")
-    # the three shapes of the sidecar's old temporary name, in two folders (one run each)
+    # a user's file at the sidecar's old temporary name (links to it: the test below)
     (out / "bar.xdmf.tmp").write_text("mine\n")
     r = _pmpm(tmp, "bar.toml", "--no-plots", "-q")
     assert r.returncode == 0, r.stderr

@@ -13,7 +13,6 @@ import pytest
 from pmpm.errors import ConfigError
 from pmpm.scene.config import parse_scene, read_toml
 from pmpm.scene.frame import expand_frame
-from pmpm.scene.toml_writer import dumps
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PORTAL = os.path.join(ROOT, "cases", "portal_frame.toml")
