@@ -312,9 +312,8 @@ def check_checkpoint_schema(f, layout):
     n = _integer(f.attrs, "n_total", "the root")
     step = _integer(f.attrs, "step", "the root", high=MAX_STEP)
     t = f.attrs.get("time")
-    if not isinstance(t, (float, int, np.floating, np.integer)) or isinstance(t, (bool, np.bool_)) \
-            or not np.isfinite(t) or t < 0:
-        raise ValueError("the root attribute 'time' is missing or not a finite number >= 0")
+    if not isinstance(t, (float, int, np.floating, np.integer)) or isinstance(t, (bool, np.bool_)):
+        raise ValueError("the root attribute 'time' is missing or not a number")
     raw = _text(f.attrs.get("attrs"))
     try:
         attrs = json.loads(raw) if isinstance(raw, str) else None
@@ -322,8 +321,8 @@ def check_checkpoint_schema(f, layout):
         attrs = None
     if not isinstance(attrs, dict):
         raise ValueError("the root attribute 'attrs' is not a JSON table")
-    if attrs.get("step", step) != step or attrs.get("time", float(t)) != float(t):
-        raise ValueError("its step or time disagree between the root and 'attrs'")
+    if attrs.get("step", step) != step:
+        raise ValueError("its step disagrees between the root and 'attrs'")
     if attrs.get("n_total") != n:
         raise ValueError(f"its counts of particle ids disagree (root {n}, attrs {attrs.get('n_total')!r})")
     particles = _group(f, "particles")
