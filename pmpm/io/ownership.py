@@ -17,11 +17,13 @@ work inside :func:`writing`: each file is claimed (checked) before it is written
 anything fails the files of that call are taken back (new files removed, replaced ones
 restored), so a failed ``pmpm plot`` or ``pmpm export`` leaves the folder as it was.
 """
+import atexit
 import contextlib
 import hashlib
 import json
 import os
 import re
+import socket
 import stat
 import tempfile
 
@@ -30,7 +32,7 @@ from pmpm.io.validate import safe_to_open_hdf5
 
 __all__ = ["OWNER_ATTR", "MANIFEST", "ForeignFileError", "check_owned", "hdf5_owner",
            "xdmf_marker", "writing", "claim", "remove_owned", "protect_input", "check_target",
-           "exclusive_temp", "replace_into", "check_manifest"]
+           "exclusive_temp", "replace_into", "check_manifest", "claim_run", "release_claims"]
 
 #: root attribute of every HDF5 file pmpm writes: the stem of the scene file
 OWNER_ATTR = "pmpm_owner"
@@ -264,6 +266,89 @@ def replace_into(path, write, binary=False, root=None):
             os.remove(tmp)
         raise
     return path
+
+
+# -- one run at a time per set of names in a folder ----------------------------------------------
+
+#: claims this process holds (released when it exits)
+_CLAIMS = set()
+_ATEXIT = []
+
+
+def _claim_text():
+    return json.dumps({"format": "pmpm-claim-1", "pid": os.getpid(), "host": socket.gethostname()})
+
+
+def _holder(path):
+    """(pid, host) of an existing claim file, or None if it is not one (read as any input:
+    regular and small, never a link or FIFO)."""
+    try:
+        if not _regular(path) or os.path.getsize(path) > 4096:
+            return None
+        with open(path, "rb") as fh:
+            data = json.loads(fh.read().decode("utf-8"))
+        if isinstance(data, dict) and data.get("format") == "pmpm-claim-1" and isinstance(data.get("pid"), int):
+            return data["pid"], str(data.get("host"))
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        pass
+    return None
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, another user's
+        return True
+    return True
+
+
+def claim_run(folder, run):
+    """Claim the names of run ``run`` (``<stem>[_<variant>]``) in ``folder`` before the run
+    writes any of them: ``.<run>.pmpm-claim`` is created exclusively (``O_EXCL | O_NOFOLLOW``)
+    holding this process's id and host. A second run that would write the same names (the
+    same scene started twice, or variant ``x`` of ``beam.toml`` beside ``beam_x.toml``) finds
+    the claim of a live process and is refused in one line; a claim whose process is gone (a
+    killed run) is taken over. The claim is removed when this process exits."""
+    path = os.path.join(folder, f".{run}.pmpm-claim")
+    if path in _CLAIMS:
+        return path
+    for _attempt in range(2):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except FileExistsError:
+            holder = _holder(path)
+            if holder is None:
+                raise _foreign(path, "is not a claim pmpm wrote") from None
+            pid, host = holder
+            if pid == os.getpid() and host == socket.gethostname():
+                _CLAIMS.add(path)
+                return path
+            if host != socket.gethostname() or _alive(pid):
+                raise ForeignFileError(path, f"another pmpm run (process {pid} on {host}) is writing "
+                                             f"these files: wait for it, or choose another output folder "
+                                             f"(delete this file if that run is gone)")
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(path)  # a killed run's claim
+            continue
+        with os.fdopen(fd, "w") as fh:
+            fh.write(_claim_text())
+        if not _ATEXIT:
+            atexit.register(release_claims)
+            _ATEXIT.append(True)
+        _CLAIMS.add(path)
+        return path
+    raise ForeignFileError(path, "another pmpm run took this claim at the same moment")
+
+
+def release_claims():
+    """Remove this process's claims (a run's end; at exit for any left)."""
+    for path in list(_CLAIMS):
+        if _holder(path) == (os.getpid(), socket.gethostname()):
+            with contextlib.suppress(OSError):
+                os.remove(path)
+        _CLAIMS.discard(path)
 
 
 def check_owned(path, owner):

@@ -246,3 +246,28 @@ def test_a_fifo_at_an_output_name_is_refused_without_hanging(tmp_path, name):
     r = _pmpm(tmp_path, "bar.toml", "--no-plots", "-q", timeout=120)  # hung before: h5py opened it
     _one_line(r, name)
     assert os.listdir(out) == [name]
+
+
+def test_two_runs_of_the_same_names_into_one_folder(tmp_path):
+    """The second of two runs started together is refused by the first's claim, in one line,
+    and the first runs to its end (issue 35, deliverable 3). Before the claim, the second
+    exited 2 only after it had written files."""
+    import time
+    # the bar at 0.125 m cells to 10 s: long enough (thousands of steps) to still be running
+    (tmp_path / "bar.toml").write_text(BAR.replace("end_time = 1.0", "end_time = 10.0")
+                                       .replace("cell_size = 0.5", "cell_size = 0.125")
+                                       .replace("cells = [54, 3]", "cells = [216, 12]"))
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    first = subprocess.Popen([sys.executable, "-m", "pmpm.cli", "bar.toml", "--no-plots", "-q"], cwd=tmp_path,
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    claim = tmp_path / "bar_results" / ".bar.pmpm-claim"
+    deadline = time.time() + 120
+    while not claim.exists() and first.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    assert claim.exists(), first.communicate()
+    r = _pmpm(tmp_path, "bar.toml", "--no-plots", "-q")
+    assert first.poll() is None, "the first run ended before the second started: make it longer"
+    _one_line(r, ".bar.pmpm-claim", "another pmpm run")
+    out, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    assert not claim.exists()  # released at the end of the run

@@ -123,3 +123,34 @@ def test_a_deleted_input_protects_nothing(tmp_path):
         out.write_text("pmpm's\n")
         ownership.check_target(str(out))
     ownership._PROTECTED.clear()
+
+
+def test_a_run_claims_its_names(tmp_path):
+    """Deliverable 3: a live claim refuses a second run; a dead process's claim is taken over;
+    the claim of this process is its own; a claim that is not pmpm's is refused. Before the
+    claim existed, nothing stopped the second run until it met the first's files."""
+    import subprocess
+    import sys
+    import time
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        path = tmp_path / ".beam_x.pmpm-claim"
+        path.write_text('{"format": "pmpm-claim-1", "pid": %d, "host": "%s"}' % (other.pid, __import__("socket").gethostname()))
+        with pytest.raises(ForeignFileError, match="another pmpm run"):
+            ownership.claim_run(str(tmp_path), "beam_x")
+    finally:
+        other.kill()
+        other.wait()
+    time.sleep(0.1)
+    assert ownership.claim_run(str(tmp_path), "beam_x") == str(path)  # the dead run's claim
+    assert ownership.claim_run(str(tmp_path), "beam_x") == str(path)  # ours: again is fine
+    ownership.release_claims()
+    assert not path.exists()
+    path.write_text("garbage")
+    with pytest.raises(ForeignFileError, match="not a claim"):
+        ownership.claim_run(str(tmp_path), "beam_x")
+    path.unlink()
+    os.symlink(tmp_path / "elsewhere", path)
+    with pytest.raises(ForeignFileError):
+        ownership.claim_run(str(tmp_path), "beam_x")
+    assert not (tmp_path / "elsewhere").exists()
