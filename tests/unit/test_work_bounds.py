@@ -111,3 +111,19 @@ def test_checkpoint_step_of_1e30_is_refused(tmp_path):
         f.attrs["step"] = 1e30
     with h5py.File(path, "r") as f, pytest.raises(ValueError, match="'step' is above"):
         check_checkpoint_schema(f, checkpoint.LAYOUT)
+
+
+def test_a_record_scaled_past_1000_g_is_refused_before_the_run(tmp_path):
+    """A record scaled past 1e300 g overflowed to inf and the run failed with exit 3 after it
+    had started; now the ground motion refuses it when it is set up (before any step or file)."""
+    from pmpm.physics.groundmotion import G, MAX_GROUND_ACCELERATION, GroundMotion
+    rec = tmp_path / "rec.txt"
+    rec.write_text("0.0 0.0\n0.01 1.0\n0.02 -1.0\n")  # m/s^2, two columns
+    ok = {"file": str(rec), "format": "two_column", "scale": MAX_GROUND_ACCELERATION * 0.99, "boundaries": [],
+          "direction": "x"}
+    with pytest.raises(ConfigError) as exc:  # past the scale check, stopped for want of a support
+        GroundMotion(ok, [], str(tmp_path))
+    assert exc.value.key == "loads.ground_motion"
+    for scale in (MAX_GROUND_ACCELERATION * 1.01, 1e100, 1e300 * G):
+        with pytest.raises(ConfigError, match="loads.ground_motion.scale"):
+            GroundMotion(dict(ok, scale=scale), [], str(tmp_path))
