@@ -252,6 +252,13 @@ def ranks(args):
     if not os.path.isfile(case):
         print(f"pmpm: error: bench ranks: --case {args.case}: no such file", file=sys.stderr)
         return 2
+    from pmpm.errors import ConfigError
+    from pmpm.scene.config import load_scene
+    try:  # the scene and its variant checked here, once: not a traceback from every child
+        load_scene(case, args.variant or None)
+    except ConfigError as exc:
+        print(f"pmpm: error: bench ranks: {exc}", file=sys.stderr)
+        return 2
     child_args = [mode, str(args.steps), case, args.variant]
     loads = {"both": ["none", "busy"], "none": ["none"], "busy": ["busy"]}[args.load]
     from pmpm.benchmarks.cpuinfo import cpu_model
