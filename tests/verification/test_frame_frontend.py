@@ -65,8 +65,8 @@ def test_expansion_gives_the_hand_written_supports_and_time_step(solvers):
     assert np.array_equal(ma[heavy], mb[heavy])
     assert int(ma[heavy].sum()) >= 2 * 2 * 7  # both bases: at least the column's width of nodes
     assert np.all(ma <= mb)
-    assert [bc.name for bc in fa.scene.boundaries] == [bc.name for bc in fb.scene.boundaries]
-    assert [(bc.moment_about, bc.reaction) for bc in fa.scene.boundaries] == \
+    assert [bc.name for bc in fa.effect("boundary").boundaries] == [bc.name for bc in fb.effect("boundary").boundaries]
+    assert [(bc.moment_about, bc.reaction) for bc in fa.effect("boundary").boundaries] == \
            [((0.0, 0.0), True), ((6.096, 0.0), True)]
 
 
