@@ -159,10 +159,10 @@ class Run:
         from pmpm.scene.fingerprint import fingerprint, scene_record
         self.record = scene_record(scene)
         self.fingerprint = fingerprint(self.record)
+        if write:  # first: a restart reads the folder's checkpoints only after the gate's checks
+            self._check_own_files()
         if restart:
             self._restore(restart)
-        if write:
-            self._check_own_files()
         self.tracker = Tracker(scene.output.track, self.solver)
         self.stop_check = make_stop_check(scene, self.solver)  # None without [[stop]]
         self.stopped = None

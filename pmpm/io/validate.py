@@ -3,7 +3,10 @@
 - :func:`read_regular`: the bytes of a text input (scene file, ground-motion record), opened
   without blocking (a FIFO given as a file never hangs the run), refused unless it is a regular
   file of at most ``max_bytes``.
-- :func:`check_regular`: the same kind check for a file another library opens (HDF5).
+- :func:`check_regular`: the same kind check for a file another library opens.
+- :func:`check_hdf5_readable`: the one check before any HDF5 file is opened (every read entry
+  point: results, checkpoints, files at output names): a regular file that does not crash
+  libhdf5 in a forked child.
 - :func:`check_links`: no soft or external link and no virtual dataset reading another file
   anywhere in an HDF5 file (pmpm writes none; following one could read outside the file or loop).
 - :func:`check_results_schema`, :func:`check_checkpoint_schema`: pmpm's own HDF5 files, every
@@ -20,7 +23,7 @@ import stat
 
 import numpy as np
 
-__all__ = ["read_regular", "check_regular", "check_links", "check_results_schema",
+__all__ = ["read_regular", "check_regular", "check_hdf5_readable", "safe_to_open_hdf5", "check_links", "check_results_schema",
            "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
 #: the trailing shape of each frame / checkpoint field pmpm writes (docs/output.md); a field not
@@ -92,6 +95,30 @@ def check_regular(path):
         raise ValueError(_not_regular(st.st_mode))
 
 
+#: the signals a crash of libhdf5 raises in the child
+_CRASH_SIGNALS = ("SIGSEGV", "SIGBUS", "SIGFPE", "SIGILL", "SIGABRT")
+
+
+def _silence_child():
+    """Let a crash in the forked child die quietly: the default action for the crash signals
+    (Open MPI, once MPI is initialised, installs its own handler that prints a 30-line stack
+    trace to standard error; Python's faulthandler prints another) and its standard output and
+    error sent to /dev/null (libhdf5 prints its error stack there). The parent says the one line."""
+    import signal
+    try:
+        import faulthandler
+        faulthandler.disable()
+    except (ImportError, RuntimeError):
+        pass
+    for name in _CRASH_SIGNALS:
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    os.dup2(null, 2)
+    os.close(null)
+
+
 def crashes_reading(fn, *args):
     """True if ``fn(*args)`` kills the process (a signal: libhdf5 dereferences the damaged
     metadata of a corrupted file and segfaults, which no exception can catch). It runs in a
@@ -103,6 +130,7 @@ def crashes_reading(fn, *args):
     if pid == 0:  # the child: read, then leave at once (no atexit, no buffers flushed)
         code = 0
         try:
+            _silence_child()
             fn(*args)
         except BaseException:  # noqa: BLE001 - the parent reports exceptions itself
             code = 1
@@ -117,17 +145,32 @@ def _open_attrs(path):
         dict(f.attrs)
 
 
+def check_hdf5_readable(path, reader=None, follow_links=True):
+    """The one check before pmpm opens an HDF5 file it did not just write (a results file given
+    to ``plot``, ``export``, :func:`pmpm.load_results` or ``--restart``, a checkpoint, a file
+    at an output name). Raises ValueError with a one-line reason unless ``path`` is a regular
+    file (``os.stat``; ``os.lstat`` with ``follow_links=False``: a link is refused) that
+    ``reader(path)`` (default: open it and read the root attributes) does not crash libhdf5 on,
+    tried first in a forked child. A FIFO would block HDF5's open for ever and is never opened;
+    a crafted file would kill the process by a segmentation fault (issue 35). FileNotFoundError
+    when it does not exist."""
+    st = os.stat(path) if follow_links else os.lstat(path)
+    if stat.S_ISLNK(st.st_mode):
+        raise ValueError("is a symbolic link")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(_not_regular(st.st_mode))
+    if crashes_reading(reader or _open_attrs, path):
+        raise ValueError("HDF5 crashed reading it (the file is damaged)")
+
+
 def safe_to_open_hdf5(path):
     """True if ``path`` is a regular file (not a link, FIFO or device: lstat, never opened)
-    whose opening and root attributes do not crash libhdf5 (tried in a forked child first).
-    A FIFO in the output folder would otherwise block HDF5's open for ever, and a crafted file
-    kill the run with a segmentation fault (issue 35)."""
+    whose opening and root attributes do not crash libhdf5 (:func:`check_hdf5_readable`)."""
     try:
-        if not stat.S_ISREG(os.lstat(path).st_mode):
-            return False
-    except OSError:
+        check_hdf5_readable(path, follow_links=False)
+    except (OSError, ValueError):
         return False
-    return not crashes_reading(_open_attrs, path)
+    return True
 
 
 def check_links(f):
