@@ -162,7 +162,13 @@ class Run:
         if write:  # first: a restart reads the folder's checkpoints only after the gate's checks
             self._check_own_files()
         if restart:
-            self._restore(restart)
+            try:
+                self._restore(restart)
+            except BaseException:
+                if write:  # refused: this run writes nothing, its claim included
+                    from pmpm.io.ownership import release_claims
+                    release_claims()
+                raise
         self.tracker = Tracker(scene.output.track, self.solver)
         self.stop_check = make_stop_check(scene, self.solver)  # None without [[stop]]
         self.stopped = None
