@@ -23,7 +23,8 @@ import stat
 
 import numpy as np
 
-__all__ = ["read_regular", "check_regular", "check_hdf5_readable", "safe_to_open_hdf5", "check_links", "check_results_schema",
+__all__ = ["read_regular", "check_regular", "check_hdf5_readable", "safe_to_open_hdf5",
+           "check_links", "check_results_schema",
            "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
 #: the trailing shape of each frame / checkpoint field pmpm writes (docs/output.md); a field not

@@ -194,7 +194,8 @@ def test_a_file_a_mesh_pulls_in_is_checked_before_it_is_opened(bar_run, tmp_path
     else:
         if case == "xdmf_binary_fifo":
             os.mkfifo(tmp_path / "geo.bin")
-            item = f'<DataItem Dimensions="3 2" NumberType="Float" Precision="8" Format="Binary">{tmp_path}/geo.bin</DataItem>'
+            item = (f'<DataItem Dimensions="3 2" NumberType="Float" Precision="8" Format="Binary">'
+                    f'{tmp_path}/geo.bin</DataItem>')
             named = "geo.bin"
         else:
             if case == "xdmf_hdf_fifo":
