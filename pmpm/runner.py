@@ -180,10 +180,15 @@ class Run:
         self.restarted_from = None
         self.record = scene_record(scene)
         self.fingerprint = fingerprint(self.record)
-        if restart:
-            self._restore(restart)
-        if write:
+        if write:  # first: a restart reads the folder's checkpoints only after the gate's checks
             self._check_own_files()
+        if restart:
+            try:
+                self._restore(restart)
+            except BaseException:
+                if write:  # refused: this run writes nothing, its claim included
+                    release_claims()
+                raise
         self.tracker = Tracker(scene.output.track, self.solver)
         self.stop_check = make_stop_check(scene, self.solver)  # None without [[stop]]
         self.stopped = None

@@ -637,6 +637,272 @@ def check_outputs(case, root):
     return None
 
 
+
+# ------------------------------------------------ issue 35's further kinds (a self-contained room)
+# Each kind: a strategy and a checker, registered in EXTRA_KINDS, which run_generator consults.
+# - ``empty_frames``: a real run's results file with its frames cut to none, to one, or every
+#   frame time NaN (a crash before any frame finished), through plot, export and load_results;
+# - ``tiny_times``: solver.end_time and the output intervals at the smallest positive doubles
+#   (5e-324, 1e-320, 2.2e-308, 1e-300, 1e-30): a run must end (exit 0) or refuse in one line,
+#   never loop or divide by zero;
+# - ``full_disk``: a run, a restart, ``pmpm plot`` or ``pmpm expand -o`` onto a real tmpfs
+#   filled to within a generated margin: exit 0, or one line with the earlier files intact
+#   (needs root to mount; fails otherwise);
+# - ``two_runs``: the same scene, or variant ``stiff`` of case.toml beside case_stiff.toml,
+#   started twice at once into one folder: both succeed one after the other, or the second is
+#   refused in one line; nothing but pmpm's files is left and the results read;
+# - ``rank_restart``: a run on 1-3 ranks stopped by max_steps, restarted on 1-3 ranks under
+#   mpirun: exit 0 with every frame time of the uninterrupted schedule.
+
+TINY_TIMES = [5e-324, 1e-320, 2.2250738585072014e-308, 1e-300, 1e-30]
+TIME_KEYS = [("solver", "end_time"), ("output", "interval"), ("output", "history_interval"),
+             ("output", "checkpoint_interval")]
+
+
+def empty_frame_cases(st):
+    return st.tuples(st.sampled_from(["none", "one", "nan_times"]),
+                     st.sampled_from(["plot", "export-vtu", "export-xdmf", "load_results"]))
+
+
+def _cut_frames(path, how):
+    import h5py
+    with h5py.File(path, "r+") as f:
+        frames = f["frames"]
+        if how == "nan_times":
+            frames["time"][...] = np.nan
+            return
+        keep = 0 if how == "none" else 1
+        for name in list(frames):
+            frames[name].resize(keep, axis=0)
+
+
+def check_empty_frames(case, run_dir, root):
+    how, command = case
+    work = os.path.join(root, "w")
+    shutil.copytree(run_dir, work, symlinks=True)
+    h5 = os.path.join("case_results", "case.h5")
+    _cut_frames(os.path.join(work, h5), how)
+    before = tree(root)
+    if command == "load_results":
+        import pmpm
+        with _isolated(work), contextlib.redirect_stderr(io.StringIO()):
+            try:
+                pmpm.load_results(h5)
+            except ValueError as exc:
+                text = str(exc)
+                if "\n" in text or not text.isprintable():
+                    return f"not one printable line: {text[:200]!r}"
+                return None if tree(root) == before else "refused but changed files"
+            except Exception as exc:  # noqa: BLE001 - anything else breaks the promise
+                return f"{type(exc).__name__}: {str(exc)[:150]!r}"
+        return None
+    argv = {"plot": ["plot", h5], "export-vtu": ["export", h5],
+            "export-xdmf": ["export", h5, "--format", "xdmf", "-o", "xd"]}[command]
+    code, _out, err, exc = cli_in_process(argv, work)
+    return promise_broken(code, err, exc, before, tree(root), prefix=h5)
+
+
+def tiny_time_cases(st):
+    return st.lists(st.tuples(st.sampled_from(TIME_KEYS), st.sampled_from(TINY_TIMES)),
+                    min_size=1, max_size=3, unique_by=lambda c: c[0])
+
+
+def check_tiny_times(case, root):
+    data = json.loads(json.dumps(BASE_SCENE))
+    data.pop("variants")
+    for (table, key), value in case:
+        data[table][key] = value
+    work = os.path.join(root, "w")
+    os.makedirs(work)
+    with open(os.path.join(work, "case.toml"), "w") as fh:
+        fh.write(to_toml(data))
+    before = tree(root)
+    # a refusal names the key; a run at the smallest end time ends after at most one step
+    code, _out, err, exc = cli_in_process(["case.toml", "--no-plots", "-q"], work)
+    return promise_broken(code, err, exc, before, tree(root), codes=(0, 2))
+
+
+def _repo_root():
+    """The folder holding pmpm/ and cases/ (found upwards: this file may move within the tree)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    while not os.path.isdir(os.path.join(here, "cases")) and os.path.dirname(here) != here:
+        here = os.path.dirname(here)
+    return here
+
+
+def _subprocess_pmpm(args, cwd, ranks=None):
+    import subprocess
+    root = _repo_root()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    cmd = [sys.executable, "-m", "pmpm.cli", *args]
+    if ranks:
+        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", "--bind-to", "none", *cmd]
+        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    return subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def _finish(proc, timeout=300):
+    out, err = proc.communicate(timeout=timeout)
+    return proc.returncode, out, err
+
+
+def full_disk_cases(st):
+    """The bytes left free; each case tries every command with that margin."""
+    return st.integers(min_value=0, max_value=200_000)
+
+
+def check_full_disk(margin, root):
+    for command in ("run", "restart", "plot", "expand"):
+        broken = _check_full_disk_one(command, margin, os.path.join(root, command))
+        if broken:
+            return f"{command}, {margin} bytes free: {broken}"
+    return None
+
+
+def _check_full_disk_one(command, margin, root):
+    import subprocess
+    disk = os.path.join(root, "disk")
+    os.makedirs(disk)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", disk], capture_output=True, text=True)
+    if r.returncode != 0:
+        return f"cannot mount a tmpfs for the full disk (root needed): {r.stderr.strip()[:100]}"
+    try:
+        data = json.loads(json.dumps(BASE_SCENE))
+        data.pop("variants")
+        data["output"]["checkpoint_interval"] = 0.004
+        if command == "restart":
+            data["solver"]["max_steps"] = 3
+        with open(os.path.join(disk, "case.toml"), "w") as fh:
+            fh.write(to_toml(data))
+        if command == "expand":  # the frame front end's case (cases/ beside the package)
+            shutil.copy(os.path.join(_repo_root(), "cases", "frame_3storey.toml"), os.path.join(disk, "case.toml"))
+        expand = ["expand", "case.toml", "--variant", "elastic", "-o", "out.toml"]
+        first = {"run": None, "restart": ["case.toml", "--no-plots", "-q"], "plot": ["case.toml", "-q"],
+                 "expand": expand}[command]
+        if first:
+            code, _o, err = _finish(_subprocess_pmpm(first, disk))
+            if code != 0:
+                return f"the first {command} failed: {err[-200:]!r}"
+        if command == "expand":  # an earlier, shorter file: rewriting it in place would need
+            with open(os.path.join(disk, "out.toml"), "w") as fh:  # more room than it frees
+                fh.write("# an earlier expansion\n")
+        if command == "restart":
+            data["solver"].pop("max_steps")
+            with open(os.path.join(disk, "case.toml"), "w") as fh:
+                fh.write(to_toml(data))
+        st_ = os.statvfs(disk)
+        with open(os.path.join(disk, "filler"), "wb") as fh:
+            fh.write(b"\0" * max(0, st_.f_bavail * st_.f_frsize - margin))
+        before = {k: v for k, v in tree(disk).items() if k != "filler"}
+        argv = {"run": ["case.toml", "-q"], "restart": ["case.toml", "--restart", "case_results/case.h5", "-q"],
+                "plot": ["plot", "case_results/case.h5"], "expand": expand}[command]
+        code, _o, err = _finish(_subprocess_pmpm(argv, disk))
+        if code == 0:
+            return None
+        broken = promise_broken(code, err, None, {}, {}, codes=(0, 2, 4))
+        if broken:
+            return broken
+        after = tree(disk)
+        keep = [k for k in before if command in ("plot", "expand") or ".ckpt" in k or k == "case.toml"]
+        lost = [k for k in keep if after.get(k) != before[k]]
+        return f"{command} onto a full disk changed earlier files: {lost[:3]}" if lost else None
+    finally:
+        subprocess.run(["umount", "-l", disk], capture_output=True)
+
+
+def two_run_cases(st):
+    return st.sampled_from(["same_scene", "variant_and_stem"])
+
+
+def check_two_runs(case, root):
+    work = os.path.join(root, "w")
+    os.makedirs(work)
+    data = json.loads(json.dumps(BASE_SCENE))
+    with open(os.path.join(work, "case.toml"), "w") as fh:
+        fh.write(to_toml(data))
+    if case == "same_scene":
+        argvs = [["case.toml", "--variant", "stiff", "--no-plots", "-q"]] * 2
+    else:  # variant stiff of case.toml writes case_stiff.*, as case_stiff.toml does
+        data.pop("variants")
+        with open(os.path.join(work, "case_stiff.toml"), "w") as fh:
+            fh.write(to_toml(data))
+        argvs = [["case.toml", "--variant", "stiff", "--no-plots", "-q"], ["case_stiff.toml", "--no-plots", "-q"]]
+    procs = [_subprocess_pmpm(a, work) for a in argvs]
+    results = [_finish(p) for p in procs]
+    for code, _o, err in results:
+        broken = promise_broken(code, err, None, {}, {}, codes=(0, 2))
+        if broken:
+            return broken
+    if all(code == 2 for code, _o, _e in results):
+        return "both runs were refused"
+    leftovers = [n for n in os.listdir(os.path.join(work, "case_results"))
+                 if n.endswith((".pmpm-tmp", ".pmpm-claim"))]
+    if leftovers:
+        return f"left {leftovers[:3]}"
+    from pmpm.io import check_results_file
+    try:
+        check_results_file(os.path.join(work, "case_results", "case_stiff.h5"))
+    except ValueError as exc:
+        return f"the results do not read: {exc}"
+    return None
+
+
+def rank_restart_cases(st):
+    return st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(2, 12))
+
+
+def check_rank_restart(case, root):
+    first, second, steps = case
+    work = os.path.join(root, "w")
+    os.makedirs(work)
+    data = json.loads(json.dumps(BASE_SCENE))
+    data.pop("variants")
+    data.pop("stop")
+    data["solver"]["end_time"] = 0.02
+    data["output"]["checkpoint_interval"] = 0.004
+    whole = json.loads(json.dumps(data))
+    data["solver"]["max_steps"] = steps
+    with open(os.path.join(work, "case.toml"), "w") as fh:
+        fh.write(to_toml(data))
+    code, _o, err = _finish(_subprocess_pmpm(["case.toml", "--no-plots", "-q"], work, ranks=first))
+    if code != 0:
+        return f"the first run on {first} rank(s) failed: {err[-200:]!r}"
+    with open(os.path.join(work, "case.toml"), "w") as fh:
+        fh.write(to_toml(whole))
+    code, _o, err = _finish(_subprocess_pmpm(["case.toml", "--restart", "case_results/case.h5", "--no-plots", "-q"],
+                                             work, ranks=second))
+    if code != 0:
+        return f"restart {first} -> {second} exit {code}: {err[-300:]!r}"
+    ref = os.path.join(root, "whole")
+    os.makedirs(ref)
+    with open(os.path.join(ref, "case.toml"), "w") as fh:
+        fh.write(to_toml(whole))
+    code, _o, err = _finish(_subprocess_pmpm(["case.toml", "--no-plots", "-q"], ref, ranks=1))
+    if code != 0:
+        return f"the uninterrupted run failed: {err[-200:]!r}"
+    from pmpm.io import read_history
+    t, tracks, _ = read_history(os.path.join(work, "case_results", "case.h5"))
+    t_ref, tracks_ref, _ = read_history(os.path.join(ref, "case_results", "case.h5"))
+    if len(t) != len(t_ref) or not np.allclose(t, t_ref, rtol=0, atol=1e-12):
+        return f"restart {first} -> {second}: history times {len(t)} rows, uninterrupted {len(t_ref)}"
+    for name, data in tracks_ref.items():  # round-off of sums in another order only (1e-9: see
+        scale = np.max(np.abs(data)) or 1.0  # tests/integration/test_restart_after_kill.py)
+        if not np.allclose(tracks[name], data, rtol=0, atol=1e-9 * scale):
+            return f"restart {first} -> {second}: track {name} differs from the uninterrupted run"
+    return None
+
+
+#: kind -> (strategy of cases, checker(case, run_dir, root), needs a finished run)
+EXTRA_KINDS = {
+    "empty_frames": (empty_frame_cases, check_empty_frames, True),
+    "tiny_times": (tiny_time_cases, lambda c, _run, r: check_tiny_times(c, r), False),
+    "full_disk": (full_disk_cases, lambda c, _run, r: check_full_disk(c, r), False),
+    "two_runs": (two_run_cases, lambda c, _run, r: check_two_runs(c, r), False),
+    "rank_restart": (rank_restart_cases, lambda c, _run, r: check_rank_restart(c, r), False),
+}
+
+
 # ------------------------------------------------------------------------------ the study
 def run_generator(kind, cases, derandomize, collect, seed=0):
     """Run ``cases`` generated cases of ``kind``; return (count, [broken promises]).
@@ -648,17 +914,22 @@ def run_generator(kind, cases, derandomize, collect, seed=0):
     base = tempfile.mkdtemp(prefix="pmpm-bad-input-")
     try:
         run_dir = None
-        if kind in ("file", "restart"):
+        if kind in EXTRA_KINDS:  # issue 35's kinds (their own section above)
+            make, check, needs_run = EXTRA_KINDS[kind]
+            run_dir = make_finished_run(tempfile.mkdtemp(dir=base)) if needs_run else None
+            strategy, checker = make(st), (lambda c, r: check(c, run_dir, r))
+        elif kind in ("file", "restart"):
             run_dir = make_finished_run(tempfile.mkdtemp(dir=base))
             h5 = os.path.join(run_dir, "case_results", "case.h5" if kind == "file" else "case.ckpt0.h5")
             objects = _h5_objects(h5)
             strategy = file_cases(st, objects) if kind == "file" else restart_cases(st, objects)
         else:
             strategy = {"scene": scene_cases, "api": api_cases, "outputs": output_cases}[kind](st)
-        checker = {"scene": lambda c, r: check_scene(c, r), "api": lambda c, r: check_api(c, r),
-                   "outputs": lambda c, r: check_outputs(c, r),
-                   "file": lambda c, r: check_file(c, run_dir, r),
-                   "restart": lambda c, r: check_restart(c, run_dir, r)}[kind]
+        if kind not in EXTRA_KINDS:
+            checker = {"scene": lambda c, r: check_scene(c, r), "api": lambda c, r: check_api(c, r),
+                       "outputs": lambda c, r: check_outputs(c, r),
+                       "file": lambda c, r: check_file(c, run_dir, r),
+                       "restart": lambda c, r: check_restart(c, run_dir, r)}[kind]
 
         @settings(max_examples=cases, derandomize=derandomize, deadline=None, database=None,
                   suppress_health_check=list(HealthCheck), print_blob=False)
@@ -688,11 +959,14 @@ def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.bad_input",
                                 description="Generated bad input against pmpm's promise.")
     p.add_argument("--cases", type=int, default=2000, help="cases in all, shared by the generators")
-    p.add_argument("--kinds", nargs="+", default=["scene", "file", "restart", "api", "outputs"],
-                   choices=["scene", "file", "restart", "api", "outputs"])
+    kinds = ["scene", "file", "restart", "api", "outputs", *EXTRA_KINDS]
+    p.add_argument("--kinds", nargs="+", default=kinds, choices=kinds)
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
-    share = {"scene": 0.45, "file": 0.18, "restart": 0.13, "api": 0.13, "outputs": 0.11}
+    share = {"scene": 0.45, "file": 0.18, "restart": 0.13, "api": 0.13, "outputs": 0.11,
+             # issue 35's kinds: the subprocess ones cost seconds a case
+             "empty_frames": 0.03, "tiny_times": 0.03, "full_disk": 0.01, "two_runs": 0.005,
+             "rank_restart": 0.005}
     total = sum(share[k] for k in args.kinds)
     report = {}
     import time

@@ -48,7 +48,7 @@ from pmpm.io._parallel import (
     validate_rows,
     write_rows,
 )
-from pmpm.io.validate import check_regular, crashes_reading
+from pmpm.io.validate import check_hdf5_readable
 from pmpm.io.validate import check_checkpoint_schema
 from pmpm.io.ownership import check_target
 
@@ -83,21 +83,27 @@ def lastgood_path(path_base):
     return f"{os.fspath(path_base)}.lastgood.h5"
 
 
-def _complete_step(path):
-    """Return the step of a complete checkpoint file, or None (missing, cut short, corrupt)."""
-    if not os.path.exists(path):
-        return None
+def _checkpoint_step(path):
+    """(step, None) of a complete checkpoint file, else (None, why not): missing, cut short,
+    not a regular file, crashing libhdf5, or unreadable."""
+    if not os.path.lexists(path):
+        return None, "missing"
     try:
-        check_regular(path)  # a FIFO would block HDF5's open
-        if crashes_reading(_read_schema, path):  # damaged metadata can crash libhdf5 itself
-            logger.warning("ignoring damaged checkpoint %s (HDF5 crashed reading it)", path)
-            return None
+        check_hdf5_readable(path, _read_schema)  # never a FIFO; damaged metadata tried in a child
         with h5py.File(path, "r") as f:
             if bool(f.attrs.get("complete", False)) and "particles/id" in f:
-                return int(f.attrs["step"])
+                return int(f.attrs["step"]), None
+        return None, "cut short (not marked complete)"
     except (OSError, KeyError, ValueError, RuntimeError, TypeError) as exc:  # RuntimeError: HDF5
-        logger.warning("ignoring unreadable checkpoint %s: %s", path, exc)  # (a link loop, a bad node)
-    return None
+        return None, str(exc) or type(exc).__name__  # (a link loop, a bad node)
+
+
+def _complete_step(path):
+    """Return the step of a complete checkpoint file, or None (missing, cut short, corrupt)."""
+    step, why = _checkpoint_step(path)
+    if step is None and why != "missing":
+        logger.warning("ignoring checkpoint %s: %s", path, why)
+    return step
 
 
 def _read_schema(path):
@@ -317,9 +323,9 @@ def read_checkpoint(path_base, comm, path=None):
     """
     paths = checkpoint_paths(path_base)
     if path is not None:
-        ok = comm.bcast(_complete_step(path) is not None if comm.Get_rank() == 0 else None)
-        if not ok:
-            raise ValueError(f"{path} is missing, cut short or not a pmpm checkpoint")
+        why = comm.bcast(_checkpoint_step(path)[1] if comm.Get_rank() == 0 else None)
+        if why is not None:  # the file named: its own reason, in the one error line
+            raise ValueError(f"{path} is not a usable pmpm checkpoint: {why}")
     path = path or comm.bcast(latest_checkpoint(path_base) if comm.Get_rank() == 0 else None)
     if path is None:
         existing = comm.bcast([p for p in paths if os.path.exists(p)] if comm.Get_rank() == 0 else None)

@@ -79,8 +79,7 @@ from pmpm.io._parallel import (
 )
 from pmpm.io.xdmf import add_frame_views, view_specs
 from pmpm.io.xdmf import write_document
-from pmpm.io.validate import check_regular
-from pmpm.io.validate import crashes_reading
+from pmpm.io.validate import check_hdf5_readable
 from pmpm.io.validate import check_results_schema
 
 __all__ = [
@@ -877,12 +876,14 @@ def check_results_file(path):
         or the ``/frames``, ``/history`` and ``/energies`` groups.
     """
     path = os.fspath(path)
-    try:
-        check_regular(path)  # a FIFO or device would block or stream forever in HDF5's open
+    try:  # a FIFO would block HDF5's open; damaged metadata can crash libhdf5 itself
+        check_hdf5_readable(path, _check_results_path)
     except OSError:
         raise ValueError("no such file") from None
-    if crashes_reading(_check_results_path, path):  # damaged metadata can crash libhdf5 itself
-        raise ValueError("not a usable pmpm results file: HDF5 crashed reading it (the file is damaged)")
+    except ValueError as exc:
+        if "crashed" in str(exc):
+            raise ValueError(f"not a usable pmpm results file: {exc}") from None
+        raise
     try:
         f = h5py.File(path, "r")
     except OSError:

@@ -301,7 +301,11 @@ def _alive(pid):
         return False
     except OSError:  # EPERM: it exists, another user's
         return True
-    return True
+    try:  # a killed rank not yet reaped by its parent (a zombie, state Z) writes nothing more
+        with open(f"/proc/{int(pid)}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[-1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
 
 
 def claim_run(folder, run):

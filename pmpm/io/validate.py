@@ -3,7 +3,10 @@
 - :func:`read_regular`: the bytes of a text input (scene file, ground-motion record), opened
   without blocking (a FIFO given as a file never hangs the run), refused unless it is a regular
   file of at most ``max_bytes``.
-- :func:`check_regular`: the same kind check for a file another library opens (HDF5).
+- :func:`check_regular`: the same kind check for a file another library opens.
+- :func:`check_hdf5_readable`: the one check before any HDF5 file is opened (every read entry
+  point: results, checkpoints, files at output names): a regular file that does not crash
+  libhdf5 in a forked child.
 - :func:`check_links`: no soft or external link and no virtual dataset reading another file
   anywhere in an HDF5 file (pmpm writes none; following one could read outside the file or loop).
 - :func:`check_results_schema`, :func:`check_checkpoint_schema`: pmpm's own HDF5 files, every
@@ -21,8 +24,10 @@ import stat
 import numpy as np
 
 from pmpm.files import _not_regular, read_regular  # noqa: F401  (read_regular: re-exported)
+from pmpm.files import check_hdf5_readable, crashes_reading  # noqa: F401  (re-exported)
 
-__all__ = ["read_regular", "check_regular", "check_links", "check_results_schema",
+__all__ = ["read_regular", "check_regular", "check_hdf5_readable", "safe_to_open_hdf5",
+           "check_links", "check_results_schema",
            "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
 #: the trailing shape of each frame / checkpoint field pmpm writes (docs/output.md); a field not
@@ -44,42 +49,14 @@ def check_regular(path):
         raise ValueError(_not_regular(st.st_mode))
 
 
-def crashes_reading(fn, *args):
-    """True if ``fn(*args)`` kills the process (a signal: libhdf5 dereferences the damaged
-    metadata of a corrupted file and segfaults, which no exception can catch). It runs in a
-    forked child that only reads and exits without flushing anything; its exceptions are the
-    caller's to meet again in the parent. Without ``os.fork`` (Windows) nothing is checked."""
-    if not hasattr(os, "fork"):
-        return False
-    pid = os.fork()
-    if pid == 0:  # the child: read, then leave at once (no atexit, no buffers flushed)
-        code = 0
-        try:
-            fn(*args)
-        except BaseException:  # noqa: BLE001 - the parent reports exceptions itself
-            code = 1
-        os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    return os.WIFSIGNALED(status)
-
-
-def _open_attrs(path):
-    import h5py
-    with h5py.File(path, "r") as f:
-        dict(f.attrs)
-
-
 def safe_to_open_hdf5(path):
     """True if ``path`` is a regular file (not a link, FIFO or device: lstat, never opened)
-    whose opening and root attributes do not crash libhdf5 (tried in a forked child first).
-    A FIFO in the output folder would otherwise block HDF5's open for ever, and a crafted file
-    kill the run with a segmentation fault (issue 35)."""
+    whose opening and root attributes do not crash libhdf5 (:func:`check_hdf5_readable`)."""
     try:
-        if not stat.S_ISREG(os.lstat(path).st_mode):
-            return False
-    except OSError:
+        check_hdf5_readable(path, follow_links=False)
+    except (OSError, ValueError):
         return False
-    return not crashes_reading(_open_attrs, path)
+    return True
 
 
 def check_links(f):

@@ -13,6 +13,7 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 from pmpm.scene.expressions import parse_expression
+from pmpm.scene.mesh_refs import MeshReferenceError, check_mesh_references
 
 __all__ = ["generate_body", "body_points", "inside_body", "check_overlaps"]
 logger = logging.getLogger(__name__)
@@ -107,6 +108,12 @@ def _mesh(geo, scene_dir, thickness):
         raise ConfigError(path, "cannot read mesh (no such regular file)")
     if os.path.getsize(path) > MAX_MESH_BYTES:  # meshio reads it whole
         raise ConfigError(path, f"cannot read mesh (larger than {MAX_MESH_BYTES >> 20} MB)")
+    try:  # what the mesh pulls in (*INCLUDE, XDMF data items): never a FIFO or a crashing HDF5
+        check_mesh_references(path, MAX_MESH_BYTES)
+    except MeshReferenceError as exc:
+        raise ConfigError(exc.path, f"cannot read mesh data ({exc.reason})") from None
+    except (OSError, ValueError) as exc:
+        raise ConfigError(path, f"cannot read mesh ({exc})") from None
     said = io.StringIO()  # meshio prints reader errors and calls sys.exit(1) on unreadable files
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):

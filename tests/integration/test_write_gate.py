@@ -253,8 +253,9 @@ def test_two_runs_of_the_same_names_into_one_folder(tmp_path):
     and the first runs to its end (issue 35, deliverable 3). Before the claim, the second
     exited 2 only after it had written files."""
     import time
-    # the bar at 0.125 m cells to 10 s: long enough (thousands of steps) to still be running
-    (tmp_path / "bar.toml").write_text(BAR.replace("end_time = 1.0", "end_time = 10.0")
+    # the bar at 0.125 m cells to 30 s: long enough (thousands of steps) to still be running when
+    # the second run has started Python and been refused, even on a loaded machine (10 s was not)
+    (tmp_path / "bar.toml").write_text(BAR.replace("end_time = 1.0", "end_time = 30.0")
                                        .replace("cell_size = 0.5", "cell_size = 0.125")
                                        .replace("cells = [54, 3]", "cells = [216, 12]"))
     env = dict(os.environ, PYTHONPATH=ROOT)
