@@ -76,14 +76,15 @@ elif phase == "during":
             kill()
     ck._write_file = _write_file
 else:
-    original = pmpm.io.write_checkpoint
+    import pmpm.runner
+    original = pmpm.runner.write_checkpoint
     def write_checkpoint(*args, **kwargs):
         out = original(*args, **kwargs)
         calls[0] += 1
         if calls[0] == 2:
             kill()
         return out
-    pmpm.io.write_checkpoint = write_checkpoint
+    pmpm.runner.write_checkpoint = write_checkpoint
 from pmpm.cli import main
 sys.exit(main(sys.argv[1:]))
 """
