@@ -35,8 +35,10 @@ Failure (D = 1) and the release of its tension
 Energy
     ``fracture_work`` (J/m^3, an energy term of the run) collects everything a failed point
     dissipates: its increments are mean(sigma) . d_eps - d(1/2 sigma : C^-1 : sigma), the
-    plastic work of a failed point is not counted twice, so the energy balance closes to
-    round-off at the material level as it does without fracture.
+    plastic work of a failed point is not counted twice, and both are kept in joules while
+    the point's volume grows with the opening (the run multiplies them by the current volume,
+    which the step scaled by 1 + tr(de)), so the energy balance of a failed point closes to
+    round-off in joules (tests/unit/test_fracture_point.py).
 
 The kernels' fracture code is compiled out when the scene names no fracture: the materials'
 kernels receive None for the parameters and the fields (numba prunes the branches; a separate
@@ -229,15 +231,22 @@ def end_point(p, phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, d
         eff[p, k] = stress[p, k]
     if phase == 1:
         crack[p, 0] += eps_eq[p] - eq0
-        work[p] = work0   # a failed point's dissipation is fracture work (not counted twice)
+    # The run counts a per-volume field times the particle's current volume, which this step
+    # scaled by 1 + tr(de) (pmpm.core.kernels.transfer). An opening crack inflates a failed
+    # point's volume by its opening strain, which would inflate the energy it already holds:
+    # its plastic work is frozen in joules from failure (its dissipation since is fracture work,
+    # not counted twice) and its fracture work holds its joules plus this step's.
+    inflate = 1.0 / (1.0 + de[p, 0] + de[p, 1])
+    work[p] = work0 * inflate
     w = 1.0
     if crack[p, 0] < crack[p, 1]:
         w = crack[p, 0] / crack[p, 1]
     nxx, nyy, nxy, nzz = release(w, sxx, syy, sxy, szz)
     stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = nxx, nyy, nxy, nzz
     power = 0.5 * ((old[0] + nxx) * de[p, 0] + (old[1] + nyy) * de[p, 1] + (old[2] + nxy) * de[p, 2])
-    fwork[p] += power - (_energy_density(E, nu, nxx, nyy, nxy, nzz)
-                         - _energy_density(E, nu, old[0], old[1], old[2], old[3]))
+    # in joules: V_new (power - U_new) + V_old U_old, with the stored energy's own volume
+    fwork[p] = ((fwork[p] + _energy_density(E, nu, old[0], old[1], old[2], old[3])) * inflate
+                + power - _energy_density(E, nu, nxx, nyy, nxy, nzz))
 
 
 @nb.njit(cache=True, inline="always")
@@ -321,5 +330,6 @@ def fracture_point_reference(phase, old, new, de, deq, damage, crack, fwork, set
         crack[0] += deq
     w = min(1.0, crack[0] / crack[1]) if crack[1] > 0 else 1.0
     out = _release_reference(w, new)
-    fwork += 0.5 * np.dot(np.asarray(old)[:3] + out[:3], de) - (energy(out) - energy(old))
+    fwork = ((fwork + energy(old)) / (1 + de[0] + de[1]) + 0.5 * np.dot(np.asarray(old)[:3] + out[:3], de)
+             - energy(out))
     return out, damage, crack, fwork

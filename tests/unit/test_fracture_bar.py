@@ -1,0 +1,93 @@
+"""A bar pulled apart through a weak band: the dissipated fracture energy does not depend on the
+cell size (the crack band regularisation of pmpm.physics.materials.fracture).
+
+A steel bar (plane stress, linear shape functions, so the strain of a cell is uniform and a
+crack localises in one cell) is held at its left end and pulled at its right end. One cell
+column in the middle is a weaker steel (lower yield stress, no hardening, a small fracture
+strain): it alone yields, fails and releases its tension while the rest stays elastic. The
+failed band is one cell wide at both resolutions and the crack band length is the cell size,
+so the energy its points dissipate is G_f times the bar's cross-section A, whatever the cell.
+
+Bounds (not fitted): every failed point dissipates G_f / l_c per unit of its volume while it
+softens (the point tests), the band's volume is its initial h A at failure and grows as the
+crack opens, and the explicit release can overshoot by the trapezoid of its last increment,
+sigma_f * d_kappa / 2 per unit volume with d_kappa = v dt / h at most the pull's strain per step
+(the release here is driven by the pull: the bar's elastic energy, 1.7 J, is below G_f A = 3 J,
+so it cannot snap the band open). Hence G_f A <= E_f <= (G_f / h) V_band(end) + overshoot, and
+a 0.5% allowance below for the band's free edges, where the stress is not quite uniaxial.
+
+Planted bug: the crack band length fixed at the coarse cell size (``length`` = 5 mm in both
+runs, or ``use_cell_size`` not called in pmpm.build with a fixed default) halves the fine
+run's energy: it fails the lower bound. The crack localising in more than the weak band
+fails the band check (seen with a weak band made of the stronger steel's yield stress).
+"""
+import numpy as np
+import pytest
+
+from pmpm.api import run
+
+L, H, T = 0.05, 0.015, 0.01     # m: bar length, height, thickness
+GF = 2.0e4                      # J/m^2
+SY_WEAK = 300e6
+E = 200e9
+PULL = 0.5                      # m/s
+CFL = 0.5
+
+
+def bar_scene(n, length=None):
+    """The bar at ``n`` cells along its length; ``length`` overrides the crack band length."""
+    h = L / n
+
+    def steel(sy, hardening, eta):
+        frac = dict(model="void_growth", eta=eta, fracture_energy=GF)
+        if length is not None:
+            frac["length"] = length
+        return dict(type="bilinear_vonmises", E=E, nu=0.3, density=7850.0, yield_stress=sy,
+                    hardening=hardening, fracture=frac)
+
+    def body(name, material, x0, x1):
+        return dict(name=name, shape="rectangle", material=material, lower=[x0, 0.0], upper=[x1, H], thickness=T)
+
+    return {"title": "bar with a weak band", "formulation": "plane_stress", "particles_per_cell": 2,
+            "grid": {"origin": [0.0, 0.0], "cell_size": h, "cells": [n, int(round(H / h))]},
+            "materials": {"steel": steel(355e6, 0.05, 1.0), "weak": steel(SY_WEAK, 0.0, 0.02)},
+            "bodies": [body("left", "steel", 0.0, L / 2), body("weak", "weak", L / 2, L / 2 + h),
+                       body("right", "steel", L / 2 + h, L)],
+            "boundary": [dict(name="held", type="fixed", lower=[0.0, 0.0], upper=[0.0, H]),
+                         dict(name="pull", type="velocity", velocity=[PULL, 0.0], lower=[L, 0.0], upper=[L, H])],
+            "solver": {"shape_function": "linear", "end_time": 8e-4, "cfl": CFL},
+            "output": {"interval": 8e-4, "fields": ["x", "vol", "damage"]}}
+
+
+def _run(n, length=None):
+    r = run(bar_scene(n, length), dataframes=False)
+    failed = r.frames["damage"][-1] >= 1.0
+    x0 = r.frames["x"][0][:, 0]
+    return r, failed, x0
+
+
+@pytest.mark.parametrize("n", [10, 20])
+def test_bar_fracture_energy_is_gf_times_area_at_two_resolutions(n):
+    h = L / n
+    r, failed, x0 = _run(n)
+    # the crack is the weak band, all of it and nothing else
+    in_band = (x0 > L / 2) & (x0 < L / 2 + h)
+    assert np.array_equal(failed, in_band)
+    energy = float(r.energies["fracture_work"][-1])
+    gfa = GF * H * T
+    g = GF / h
+    c = np.sqrt(E / (7850.0 * (1 - 0.3 ** 2)))
+    overshoot = 0.5 * SY_WEAK * PULL * (CFL * h / c) / h * (h * H * T)
+    v_band = float(r.frames["vol"][-1][failed].sum())
+    assert gfa * (1 - 0.005) <= energy <= g * v_band + overshoot
+    # the run's energy balance still closes (the loss is the transfers', as without fracture:
+    # a few percent of what the pull put in)
+    e = r.energies
+    assert abs(e["numerical_loss"][-1]) < 0.05 * e["external_work"][-1]
+
+
+def test_a_fixed_band_length_would_not_regularise():
+    """The guard of the test above: with the band length fixed at the coarse cell size the fine
+    bar dissipates half of G_f A (the mesh dependence Hillerborg's scaling removes)."""
+    r, failed, _ = _run(20, length=L / 10)
+    assert float(r.energies["fracture_work"][-1]) < 0.6 * GF * H * T
