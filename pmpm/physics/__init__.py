@@ -14,3 +14,4 @@ from pmpm.physics import pushover  # noqa: F401
 from pmpm.physics import damping  # noqa: F401
 from pmpm.physics import events  # noqa: F401
 from pmpm.physics import supports  # noqa: F401
+from pmpm.physics import fracture_record  # noqa: F401

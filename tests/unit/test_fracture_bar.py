@@ -21,6 +21,8 @@ runs, or ``use_cell_size`` not called in pmpm.build with a fixed default) halves
 run's energy: it fails the lower bound. The crack localising in more than the weak band
 fails the band check (seen with a weak band made of the stronger steel's yield stress).
 """
+import os
+
 import numpy as np
 import pytest
 
@@ -59,6 +61,25 @@ def bar_scene(n, length=None):
             "output": {"interval": 8e-4, "fields": ["x", "vol", "damage"]}}
 
 
+def _toml(table, prefix=""):
+    """TOML text of the scene dicts above (scalars, lists, tables, arrays of tables)."""
+    def value(v):
+        if isinstance(v, str):
+            return '"' + v + '"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+    lines = [f"{k} = {value(v)}" for k, v in table.items()
+             if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict))]
+    for k, v in table.items():
+        if isinstance(v, dict):
+            lines += [f"[{prefix}{k}]", _toml(v, f"{prefix}{k}.")]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                lines += [f"[[{prefix}{k}]]", _toml(item, f"{prefix}{k}.")]
+    return "\n".join(lines) + "\n"
+
+
 def _run(n, length=None):
     r = run(bar_scene(n, length), dataframes=False)
     failed = r.frames["damage"][-1] >= 1.0
@@ -91,3 +112,26 @@ def test_a_fixed_band_length_would_not_regularise():
     bar dissipates half of G_f A (the mesh dependence Hillerborg's scaling removes)."""
     r, failed, _ = _run(20, length=L / 10)
     assert float(r.energies["fracture_work"][-1]) < 0.6 * GF * H * T
+
+
+# planted bug: FractureRecord.after_stress_update not overriding the hook (renamed) -> no
+# first fracture in the summary; "damage" left out of the written frames -> the file check fails
+def test_damage_is_written_and_the_first_fracture_is_in_the_summary(tmp_path, monkeypatch):
+    import h5py
+    monkeypatch.chdir(tmp_path)
+    sc = bar_scene(10)
+    sc["output"].update(directory="out", fields=["x", "damage"])
+    (tmp_path / "bar.toml").write_text(_toml(sc))
+    r = run("bar.toml", write=True, dataframes=False)
+    first = r.summary["first_fracture"]
+    assert list(first) == ["weak"]          # only the weak band fails
+    # it fails once the band's plastic strain passes eps_f(1/3) = 0.02 exp(-0.5): the pull
+    # must first have stretched the band by eps_f h and the elastic bar by sigma_y L / E
+    h = L / 10
+    t_min = (0.02 * np.exp(-0.5) * h + SY_WEAK / E * L * 0.9) / PULL
+    assert t_min < first["weak"] < 8e-4
+    with h5py.File(r.path, "r") as f:
+        damage = f["frames/damage"][-1]
+        assert damage.max() == 1.0 and damage.min() >= 0.0
+    xdmf = [p for p in os.listdir("out") if p.endswith(".xdmf")]
+    assert xdmf and 'Name="damage"' in open(os.path.join("out", xdmf[0])).read()
