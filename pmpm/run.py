@@ -46,7 +46,8 @@ def energy_summary(e):
     """The run summary's energy line: the external work and the numerical loss (J), the loss
     also as a fraction of the energy put in (initial energy plus external work)."""
     # initial energy + external work: by the definition of the loss, the terms and the loss
-    supplied = e["kinetic"] + e["strain"] + e["plastic_work"] + e["damping_work"] + e["numerical_loss"]
+    supplied = (e["kinetic"] + e["strain"] + e["plastic_work"] + e.get("fracture_work", 0.0) + e["damping_work"]
+                + e["numerical_loss"])
     share = f" ({100 * e['numerical_loss'] / supplied:.3g}% of the energy put in)" if supplied > 0 else ""
     return (f"external work {e['external_work']:.6g} J, kinetic {e['kinetic']:.6g} J, strain "
             f"{e['strain']:.6g} J, plastic {e['plastic_work']:.6g} J, damping {e['damping_work']:.6g} J, "

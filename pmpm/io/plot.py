@@ -45,7 +45,7 @@ __all__ = ["plot_results", "plot_deformed", "energy_balance_error", "energy_figu
 
 logger = logging.getLogger(__name__)
 
-STORED = ("kinetic", "strain_energy", "plastic_work", "damping_work")
+STORED = ("kinetic", "strain_energy", "plastic_work", "fracture_work", "damping_work")
 #: energy that left the body: dissipated by damping or carried out by removed particles
 LEFT = ("damping_work", "viscous_damping_work", "removed_energy")
 DISPLACEMENTS = ("ux", "uy", "uz")

@@ -14,11 +14,13 @@ import numpy as np
 
 from pmpm.core.effects import register_energy
 from pmpm.errors import ConfigError
-from pmpm.physics.materials import fracture as fracture_option
 
 #: the energy a plastic material dissipates (J): its per-particle field ``plastic_work`` (J/m^3)
 #: integrated over the volume, a part of the internal work
 PLASTIC_WORK = register_energy("plastic_work", "plastic work, dissipated", outside=False)
+
+# after plastic_work: the fracture option registers its fracture_work, the next energy column
+from pmpm.physics.materials import fracture as fracture_option  # noqa: E402
 
 __all__ = ["Material", "KinematicHardening", "Params", "FORMULATIONS"]
 logger = logging.getLogger(__name__)
