@@ -6,7 +6,7 @@ the scene by a sub-table of the material::
 
     [materials.steel.fracture]
     model = "void_growth"      # Kanvinde & Deierlein's void growth model (docs/fracture.md)
-    eta = 2.6                  # fracture strain at zero triaxiality (the model's capacity)
+    eta = 1.0                  # fracture strain at zero triaxiality (illustrative: docs/fracture.md)
     fracture_energy = 1.0e5    # G_f, J/m^2: energy per unit crack area the release dissipates
     length = 0.01              # l_c, m: width of the crack band (default: the grid's cell size)
 
