@@ -63,3 +63,20 @@ def test_the_parts_move_apart(plate):
     e = plate.energies
     print({k: round(float(e[k][-1]), 4) for k in ("fracture_work", "plastic_work", "internal_work",
                                                    "external_work", "numerical_loss")})
+
+
+def energy_balances():
+    """The plate's energies with fracture and with a locus it never reaches (eta = 1e9: the
+    same plasticity, no point fails), printed by ``python tests/verification/test_fracture_plate.py``
+    (docs/fracture.md quotes them)."""
+    keys = ("fracture_work", "plastic_work", "strain_energy", "internal_work", "external_work", "numerical_loss")
+    for label, over in (("fracturing plate", {}), ("plate that does not fail", {"materials.steel.fracture.eta": 1e9})):
+        r = run("cases/fracture_notched_plate.toml", dataframes=False,
+                overrides={"solver.end_time": 1.6e-3, "output.fields": ["x"], **over})
+        e = {k: float(r.energies[k][-1]) for k in keys}
+        print(f"{label}: " + ", ".join(f"{k} {v:.4g} J" for k, v in e.items())
+              + f"; loss / external work {100 * e['numerical_loss'] / e['external_work']:.2f}%")
+
+
+if __name__ == "__main__":
+    energy_balances()
