@@ -35,14 +35,9 @@ def __getattr__(name):
         from pmpm.core.solver import Solver
         return Solver
     if name == "Run":
-        from pmpm.run import Run
+        from pmpm.runner import Run
         return Run
-    if name == "run":
-        # the module pmpm/run.py, made callable as pmpm.api.run (see the end of pmpm/run.py):
-        # importing it binds pmpm.run to it anyway, so the name is the same object either way
-        import pmpm.run
-        return pmpm.run
-    if name in ("load_results", "Result"):
+    if name in ("run", "load_results", "Result"):
         from pmpm import api
         return getattr(api, name)
     raise AttributeError(name)

@@ -89,10 +89,10 @@ def _progress_callback(progress):
 
 
 def _collecting_run(scene, comm, write, callback):
-    """A :class:`pmpm.run.Run` that also keeps frames in memory (without output) and reports
+    """A :class:`pmpm.runner.Run` that also keeps frames in memory (without output) and reports
     progress to ``callback``."""
     from pmpm.io._parallel import fill_value
-    from pmpm.run import Run
+    from pmpm.runner import Run
 
     class CollectingRun(Run):
         def __init__(self, *args, **kwargs):
@@ -311,7 +311,7 @@ def _history_tables(times, tracks, columns, pandas):
 def _from_memory(r, dataframes):
     """The Result of a run without output, from what the run kept in memory."""
     from pmpm.io.tracking import HISTORY_COLUMNS
-    from pmpm.run import ENERGY_COLUMNS
+    from pmpm.runner import ENERGY_COLUMNS
 
     pandas = _use_pandas(dataframes)
     times = np.array(r.history_t, dtype=float)
@@ -389,7 +389,7 @@ def load_results(path, dataframes=None):
 
 def _stop_record(attrs):
     """The stop record of a results file's root attributes (``stop_<key>``), or None."""
-    from pmpm.run import STOP_KEYS
+    from pmpm.runner import STOP_KEYS
 
     if attrs.get("end_reason") != "stop":
         return None

@@ -7,8 +7,8 @@ ground motion, pushover, damping, events, supports, reactions, section cuts; pmp
 the decomposition, this rank's particles with every field the run keeps, then the solver, and
 the time-step check. The solver receives the parts and never sees the scene.
 
-Without ``[contact]`` the solver is pmpm.core.solver.Solver; with it pmpm.physics.contact's
-ContactSolver (one velocity field per body).
+Without ``[contact]`` the grid holds one velocity field (pmpm.core.fields.GridFields); with it
+one per body (pmpm.physics.contact.BodyFields).
 """
 import logging
 import os
@@ -30,7 +30,7 @@ from pmpm.core.shape import MAX_HALF_LENGTH, ghost_width, min_cells
 from pmpm.core.solver import Solver, StepOptions
 from pmpm.core.transfers import make_transfer
 from pmpm.errors import ConfigError
-from pmpm.physics.contact import ContactSolver, contact_slots
+from pmpm.physics.contact import BodyFields, contact_slots
 from pmpm.physics.materials import make_material
 from pmpm.scene.limits import check_memory, check_time_step
 from pmpm.scene.setup_particles import choose_axis, create_particles, make_decomposition, place_points
@@ -154,12 +154,10 @@ def build_solver(scene, comm=None):
         particles["domain"] = _initial_domains(scene, grid, particles["vol"], particles["body"])
     parts = (grid, decomp, particles, materials, scheme, transfer, effects, step_options(scene), len(points["m"]))
     del points, setup.points
-    kwargs = dict(mass_cutoff=cfg.mass_cutoff, keeps_F=keeps_F, rotates_stress=rotates_stress)
-    if scene.contact is None:
-        solver = Solver(*parts, **kwargs)
-    else:
-        slot_of, n_slots = contact_slots(scene)
-        solver = ContactSolver(*parts, friction=float(scene.contact.friction), slot_of=slot_of, n_slots=n_slots,
-                               **kwargs)
+    grid_fields = None   # one velocity field (pmpm.core.fields); [contact]: one per body
+    if scene.contact is not None:
+        grid_fields = BodyFields(scene.contact.friction, *contact_slots(scene))
+    solver = Solver(*parts, mass_cutoff=cfg.mass_cutoff, keeps_F=keeps_F, rotates_stress=rotates_stress,
+                    grid_fields=grid_fields)
     check_time_step(scene, materials, solver.vmax)  # positive, finite, not too many steps
     return solver

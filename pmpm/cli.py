@@ -252,7 +252,7 @@ def run_case(args):
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",
                      EXIT_BAD_INPUT) if rank == 0 else EXIT_BAD_INPUT
     install_abort_hook(comm)
-    from pmpm.run import Run
+    from pmpm.runner import Run
     paths = []
     for scene in scenes:
         try:
@@ -315,6 +315,8 @@ def main(argv=None):
         return _fail(f"{argv[0]}: no such scene file (did you mean pmpm --{argv[0]}?)", EXIT_BAD_INPUT)
     _quiet_warnings()
     args, extra = build_parser().parse_known_args(_with_command(argv))
+    if getattr(args, "driver_args", None) is not None:  # pmpm bench accuracy|peer: the driver parses them
+        args.driver_args, extra = extra + args.driver_args, []
     if extra:  # named after the subcommand, like every other bad argument
         return (_fail(f"{args.command}: unrecognized arguments: {' '.join(extra)}", EXIT_BAD_INPUT)
                 if _rank_env() == 0 else EXIT_BAD_INPUT)

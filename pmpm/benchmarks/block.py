@@ -3,20 +3,12 @@
 Shared by the throughput, effects and scaling benchmarks, the kernel warm-up and tests.
 """
 import math
+from pmpm.benchmarks.args import MATERIALS
+from pmpm.scene.config import parse_scene
 
 __all__ = ["MATERIALS", "YIELD_AFTER_STEPS", "block_scene"]
 
 #: the benchmark block's materials (the plastic ones' yield stress is set by block_scene)
-MATERIALS = {
-    "elastic": {"type": "linear_elastic", "E": 200e9, "nu": 0.3, "density": 7850.0},
-    "linear_elastic": {"type": "linear_elastic", "E": 200e9, "nu": 0.3, "density": 7850.0},
-    "smooth_vonmises": {"type": "smooth_vonmises", "E": 200e9, "nu": 0.3, "density": 7850.0,
-                        "yield_stress": 250e6, "hardening": 0.05, "smoothness": 10.0},
-    "bilinear_vonmises": {"type": "bilinear_vonmises", "E": 200e9, "nu": 0.3, "density": 7850.0,
-                          "yield_stress": 250e6, "hardening": 0.05},
-    # hyperelastic with the steel's small-strain constants: the same block, the same CFL step
-    "neo_hookean": {"type": "neo_hookean", "E": 200e9, "nu": 0.3, "density": 7850.0},
-}
 
 
 #: steps of the block's shear after which a plastic block material yields (see block_scene);
@@ -39,7 +31,6 @@ def block_scene(particles, shape="cubic", scheme="musl", material="elastic", ppc
     ductile fracture option with a locus it never reaches (eta = 1e6): the damage update's cost
     on every yielding point, no point failing.
     """
-    from pmpm.scene.config import parse_scene
     cells_total = particles / ppc ** 2
     ny = max(4, int(round(math.sqrt(cells_total / aspect))))
     nx = max(4, int(round(cells_total / ny)))

@@ -1,39 +1,19 @@
-"""``pmpm bench ...``: the benchmark sub-commands and their dispatch."""
-from pmpm.benchmarks.block import MATERIALS
+"""``pmpm bench ...``: the benchmark sub-commands and their dispatch.
+
+``throughput``, ``effects``, ``scaling``, ``fixedcost`` and ``ranks`` are the package's own.
+``accuracy`` and ``peer`` run drivers that live in the repository, not in the installed package
+(``studies/accuracy.py``: sweeps against closed forms and an FE model; ``bench/peer.py``: Taichi
+peers): from a checkout, with the checkout importable (its root the working directory of
+``python -m pmpm`` or on ``PYTHONPATH``).
+"""
+import argparse
+import importlib
+
+from pmpm.benchmarks.args import MATERIALS, ranks_arguments
+from pmpm.benchmarks.args import finite_positive as _finite_positive
+from pmpm.benchmarks.args import positive as _positive
 
 __all__ = ["add_bench_parser", "main"]
-
-
-#: largest count a benchmark option takes (particles, steps, repeats): 10^9 particles already
-#: need ~1 TB; a larger number is a typo (10^15) and would fail inside numpy, not here
-MAX_COUNT = 10 ** 9
-
-
-def _positive(text):
-    """argparse type: an integer from 1 to MAX_COUNT (a bad value is a one-line error, exit 2)."""
-    import argparse
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1 (got {value})")
-    if value > MAX_COUNT:
-        raise argparse.ArgumentTypeError(f"must be at most {MAX_COUNT:.0e} (got {value:.3g})")
-    return value
-
-
-def _finite_positive(text):
-    """argparse type: a finite float > 0 and at most 1e15 (inf and nan refused)."""
-    import argparse
-    import math
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and 0 < value <= 1e15):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0 and at most 1e15 (got {text!r})")
-    return value
 
 
 def add_bench_parser(sub):
@@ -70,16 +50,6 @@ def add_bench_parser(sub):
     s.add_argument("--repeat", type=_positive, default=3, help="number of timed repeats (default 3)")
     s.add_argument("--ppc", type=_positive, default=2,
                    help="particles per cell per direction (more particles on the same grid)")
-    pe = bs.add_parser("peer", help="pmpm's cubic MUSL step side by side with JIT peers (Taichi MUSL and MLS-MPM)")
-    pe.add_argument("--particles", type=_positive, nargs="+", default=[200_000, 1_000_000],
-                    help="particle counts of the block (default 200000 1000000)")
-    pe.add_argument("--steps", type=_positive, default=10, help="steps per timed repeat (default 10)")
-    pe.add_argument("--repeat", type=_positive, default=7,
-                    help="timed repeats, pmpm and the peer interleaved (default 7)")
-    pe.add_argument("--peers", nargs="+", choices=["musl", "mls_quadratic", "mls_cubic"],
-                    default=["musl", "mls_quadratic", "mls_cubic"],
-                    help="the Taichi programs: plain MUSL (cubic) and MLS-MPM with APIC "
-                         "(quadratic, cubic); default all three")
     fc = bs.add_parser("fixedcost", help="per-step fixed cost: small scenes against a large one")
     fc.add_argument("--particles", type=_positive, nargs="+", default=[2_000, 7_700, 8_000, 200_000],
                     help="particle counts of the blocks, timed round robin (default 2000 7700 8000 200000)")
@@ -96,30 +66,49 @@ def add_bench_parser(sub):
                     help="with --output: runs of this many steps and twice as many (default 1500)")
     fc.add_argument("--whole-window", action="store_true",
                     help="also time every case with the grid tiles off (each node pass over the whole window)")
-    from pmpm.benchmarks import ranks
-    ranks.add_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
-    from pmpm.benchmarks.accuracy import add_arguments
-    add_arguments(bs.add_parser("accuracy", help="error against wall time over shape, ppc, cell size, scheme"))
+    ranks_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
+    for name, (_module, _entry, text) in REPOSITORY_DRIVERS.items():
+        p = bs.add_parser(name, help=f"{text} (from a checkout: module doc)", add_help=False)
+        p.add_argument("driver_args", nargs=argparse.REMAINDER,
+                       help=f"the driver's own options (pmpm bench {name} --help lists them)")
+
+
+#: subcommands run by the repository's drivers: name -> (module, entry function, help)
+REPOSITORY_DRIVERS = {
+    "peer": ("bench.peer", "peer", "pmpm's cubic MUSL step side by side with JIT peers (Taichi MUSL and MLS-MPM)"),
+    "accuracy": ("studies.accuracy", "accuracy", "error against wall time over shape, ppc, cell size, scheme"),
+}
+
+
+def _repository_driver(name, argv):
+    """Run the repository driver of ``pmpm bench <name>`` with its own options ``argv``."""
+    module_name, entry, _ = REPOSITORY_DRIVERS[name]
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError:
+        print(f"pmpm: error: bench {name}: runs {module_name.replace('.', '/')}.py of a checkout of the "
+              f"repository (not installed); run it from the checkout's root")
+        return 2
+    parser = argparse.ArgumentParser(prog=f"pmpm bench {name}")
+    module.add_arguments(parser)
+    return getattr(module, entry)(parser.parse_args(argv))
 
 
 def main(args):
-    """Dispatch ``pmpm bench <name>``."""
+    """Dispatch ``pmpm bench <name>`` (the drivers imported here: ``pmpm --help`` needs only
+    the options, no kernel module)."""
+    from pmpm.benchmarks import ranks
+    from pmpm.benchmarks.fixed_cost import fixed_cost
+    from pmpm.benchmarks.scaling import scaling
     from pmpm.benchmarks.throughput import effects, throughput
+    if args.bench in REPOSITORY_DRIVERS:
+        return _repository_driver(args.bench, args.driver_args)
     if args.bench == "throughput":
         return throughput(args)
-    if args.bench == "accuracy":
-        from pmpm.benchmarks.accuracy import accuracy
-        return accuracy(args)
     if args.bench == "fixedcost":
-        from pmpm.benchmarks.fixed_cost import fixed_cost
         return fixed_cost(args)
-    if args.bench == "peer":
-        from pmpm.benchmarks.peer import peer
-        return peer(args)
     if args.bench == "ranks":
-        from pmpm.benchmarks.ranks import ranks
-        return ranks(args)
+        return ranks.ranks(args)
     if args.bench == "effects":
         return effects(args)
-    from pmpm.benchmarks.scaling import scaling
     return scaling(args)

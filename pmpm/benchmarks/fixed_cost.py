@@ -22,7 +22,11 @@ import time
 import numpy as np
 
 from pmpm.benchmarks.block import block_scene
+from pmpm.benchmarks.ranks import FRAME_CASE
 from pmpm.core.grid import TILE
+from pmpm.scene.config import load_scene
+from pmpm.build import build_solver
+from pmpm.runner import Run
 
 __all__ = ["fixed_cost", "measure", "fit_fixed_cost", "frame_scene"]
 
@@ -32,15 +36,12 @@ FRAME = "frame"
 
 def frame_scene(variant="elastic"):
     """A variant of the main job (cases/portal_frame.toml) as the benchmark runs it."""
-    from pmpm.benchmarks.accuracy import FRAME_CASE
-    from pmpm.scene.config import load_scene
     return load_scene(FRAME_CASE, variant)[0]
 
 
 def _cases(sizes, material, frames, whole_window):
     """(scene label, tiles on, solver) of every case, the blocks first."""
     from mpi4py import MPI
-    from pmpm.build import build_solver
     scenes = [("block", block_scene(n, material=material)) for n in sizes]
     scenes += [(f"{FRAME} {v}", frame_scene(v)) for v in frames]
     cases = []
@@ -97,7 +98,6 @@ class FrameRun:
         import tempfile
         self.tmp = tempfile.mkdtemp(prefix="pmpm_fixedcost_")
         self.variant = variant
-        from pmpm.benchmarks.accuracy import FRAME_CASE
         import shutil
         self.case = shutil.copy(FRAME_CASE, self.tmp)
         self.n = None  # known after the first run
@@ -105,8 +105,6 @@ class FrameRun:
     def _run(self, steps, clock):
         import os
         from mpi4py import MPI
-        from pmpm.run import Run
-        from pmpm.scene.config import load_scene
         cwd = os.getcwd()
         os.chdir(self.tmp)  # the scene's output folder is relative to the working directory
         try:

@@ -13,6 +13,7 @@ import contextlib
 import time
 
 from pmpm.core import kernels as K
+import pmpm.core.solver as solver_module
 
 __all__ = ["phase_times", "PHASE_KERNELS"]
 
@@ -54,7 +55,6 @@ def phase_times(solver, steps):
             stack.enter_context(_timed(K, name, totals))
         for material in solver.materials:
             stack.enter_context(_timed(material, "update_stress", totals))
-        import pmpm.core.solver as solver_module
         stack.enter_context(_timed(solver_module, "wait_all", totals))   # the step-end reduction
         for name in ("sum_halo", "migrate"):
             stack.enter_context(_timed(solver.decomp, name, totals))

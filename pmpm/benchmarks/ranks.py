@@ -1,7 +1,7 @@
 """``pmpm bench ranks``: the main job on one rank and on two, idle and under a background load.
 
 The main job is ``mpirun -n 2 --bind-to core pmpm cases/portal_frame.toml``. This benchmark
-runs its elastic variant for ``--steps`` steps as that command runs it (``pmpm.run.Run`` with
+runs its elastic variant for ``--steps`` steps as that command runs it (``pmpm.runner.Run`` with
 its output: frames, histories, tracked points, section cuts, reactions, energies and the final
 checkpoint, into a temporary folder), on 1 and on 2 ranks, each launched by ``mpirun``
 itself, ``--repeat`` times in turn (1, 2, 1, 2, ...), and prints the median wall time of the
@@ -33,38 +33,18 @@ import sys
 import tempfile
 import time
 
+from pmpm.benchmarks.args import FRAME_CASE, VARIANT, positive
+from pmpm.benchmarks.args import ranks_arguments as add_arguments  # noqa: F401  (its options)
+from pmpm.build import build_solver
+from pmpm.scene.config import load_scene
+from pmpm.benchmarks.phase_profile import phase_times
+from pmpm.runner import Run
+from pmpm.benchmarks.cpuinfo import cpu_model
+
 __all__ = ["ranks", "add_arguments", "BackgroundLoad"]
 
-#: the main job's scene and the variant timed
-FRAME_CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                          "cases", "portal_frame.toml")
-VARIANT = "elastic"
 #: steps a child runs before it times anything (the numba cache read, first touch of the arrays)
 WARM_STEPS = 5
-
-
-def add_arguments(p):
-    """The options of ``pmpm bench ranks``."""
-    from pmpm.benchmarks.cli import _positive
-    p.add_argument("--steps", type=_positive, default=2000,
-                   help="steps of each run (default 2000, about 0.017 s of the frame's 0.25 s)")
-    p.add_argument("--repeat", type=_positive, default=5, help="runs of each rank count (default 5)")
-    p.add_argument("--ranks", type=_positive, nargs="+", default=[1, 2],
-                   help="rank counts compared (default 1 2)")
-    p.add_argument("--load", choices=["both", "none", "busy"], default="both",
-                   help="without a background load, under one, or both (default both)")
-    p.add_argument("--bind", choices=["core", "none"], default="core",
-                   help="mpirun --bind-to (default core, as the main job's command)")
-    p.add_argument("--no-output", action="store_true",
-                   help="run the solver alone (no files, no histories) instead of the whole run")
-    p.add_argument("--phases", action="store_true",
-                   help="time the phases of the step on every rank instead (solver only)")
-    p.add_argument("--case", default=FRAME_CASE,
-                   help="scene file timed (default the main job's cases/portal_frame.toml); a scene "
-                        "whose output paths are relative runs in a temporary folder")
-    p.add_argument("--variant", default=VARIANT, help=f"its variant (default {VARIANT})")
-    p.add_argument("--count-calls", action="store_true",
-                   help="also count the MPI calls per step (a PMPI shim built with mpicc)")
 
 
 # -- the background load ------------------------------------------------------------------------
@@ -121,8 +101,6 @@ def _mpirun(k, bind, args, env=None):
 def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
     """Under mpirun: run the scene (``mode`` "run", "solver" or "phases") and write its figures."""
     from mpi4py import MPI
-    from pmpm.build import build_solver
-    from pmpm.scene.config import load_scene
     comm = MPI.COMM_WORLD
     tmp = comm.bcast(tempfile.mkdtemp(prefix="pmpm_ranks_run_") if comm.rank == 0 else None)
     cwd = os.getcwd()
@@ -148,7 +126,6 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
         del warm
         record = {"ranks": comm.size, "steps": steps, "mode": mode, "particles_total": particles}
         if mode == "phases":
-            from pmpm.benchmarks.phase_profile import phase_times
             s = build_solver(scene, comm)
             for _ in range(WARM_STEPS):
                 s.step()
@@ -160,7 +137,6 @@ def _child(mode, steps, out, scene_file=FRAME_CASE, variant=VARIANT):
                           phases=comm.gather(phases), particles=comm.gather(s.particles.n))
         else:
             if mode == "run":
-                from pmpm.run import Run
                 run = Run(scene, comm)
                 go = run.execute
             else:
@@ -254,7 +230,6 @@ def ranks(args):
         return 2
     child_args = [mode, str(args.steps), case, args.variant]
     loads = {"both": ["none", "busy"], "none": ["none"], "busy": ["busy"]}[args.load]
-    from pmpm.benchmarks.cpuinfo import cpu_model
     print(f"pmpm bench ranks: {os.path.relpath(case)} [{args.variant}], {args.steps} steps, "
           f"{'solver only' if args.no_output else 'phases' if args.phases else 'with its output'}, "
           f"ranks {args.ranks}, {args.repeat} runs each in turn, mpirun --bind-to {args.bind}; "

@@ -17,6 +17,8 @@ import statistics
 import time
 
 import numpy as np
+from pmpm.build import build_solver
+from pmpm.benchmarks.block import block_scene
 
 __all__ = ["scaling"]
 
@@ -43,7 +45,6 @@ def _measure(solver, steps):
 def _reference_cpu(scene_fn, total, steps, comm):
     """CPU time of the same work on one rank (rank 0 alone; the others sleep, not spin)."""
     from mpi4py import MPI
-    from pmpm.build import build_solver
     cpu = None
     if comm.rank == 0:
         s = build_solver(scene_fn(total), MPI.COMM_SELF)
@@ -58,8 +59,6 @@ def _reference_cpu(scene_fn, total, steps, comm):
 def scaling(args):
     """Run the benchmark under the current MPI world; prints a table and a JSON line."""
     from mpi4py import MPI
-    from pmpm.benchmarks.block import block_scene
-    from pmpm.build import build_solver
     comm = MPI.COMM_WORLD
     size, rank = comm.size, comm.rank
     total = args.particles * (size if args.mode == "weak" else 1)

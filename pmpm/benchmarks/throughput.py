@@ -14,6 +14,8 @@ import numba as nb
 import numpy as np
 
 from pmpm.benchmarks.block import MATERIALS, YIELD_AFTER_STEPS, block_scene
+from pmpm.build import build_solver
+from pmpm.benchmarks.phase_profile import phase_times
 
 __all__ = ["throughput", "effects", "stream_triad_bandwidth", "step_bytes_per_particle"]
 logger = logging.getLogger(__name__)
@@ -99,7 +101,6 @@ def step_bytes_per_particle(solver):
 def throughput(args):
     """Particle-steps per second of one rank on an elastic (or plastic) block."""
     from mpi4py import MPI
-    from pmpm.build import build_solver
     t0 = time.perf_counter()
     interp = getattr(args, "interpolation", "point")
     extra = None if interp == "point" else {"interpolation": interp}
@@ -184,7 +185,6 @@ def _effect_scenes(n, record):
 
 def _print_phases(solver, steps, n):
     """The instrumented step: ns per particle-step of each kernel (pmpm/benchmarks/phase_profile.py)."""
-    from pmpm.benchmarks.phase_profile import phase_times
     total, phases = phase_times(solver, steps)
     scale = 1e9 / (steps * n)
     rows = {k: v * scale for k, v in sorted(phases.items(), key=lambda kv: -kv[1])}
@@ -199,7 +199,6 @@ def effects(args):
     import os
     import tempfile
     from mpi4py import MPI
-    from pmpm.build import build_solver
     with tempfile.TemporaryDirectory() as tmp:
         record = os.path.join(tmp, "record.txt")
         t = np.linspace(0.0, 10.0, 2001)

@@ -8,6 +8,7 @@ without anyone naming it.
 import logging
 
 import numpy as np
+from pmpm.core.kernels import is_identity
 
 __all__ = ["Particles", "CORE_FIELDS", "OPTIONAL_FIELDS", "DEFORMATION_FIELDS", "start_deformation"]
 logger = logging.getLogger(__name__)
@@ -109,7 +110,6 @@ class Particles:
         run's memory). Gathering into a new array streams its writes; following the
         permutation's cycles in place would save that memory but costs twice the cache misses,
         and a sort after a few particles changed cell shifts every row behind them."""
-        from pmpm.core.kernels import is_identity
         if is_identity(order):  # the usual case in solids: nobody changed cell since the last sort
             return
         for k in list(self.fields):

@@ -31,8 +31,10 @@ from mpi4py import MPI
 from decomposition import alltoallv_fields, wait_all
 from pmpm.core import kernels as K
 from pmpm.core.effects import EffectList, energy_terms
+from pmpm.core.fields import GridFields
 from pmpm.core.grid import GridWindow, choose_tile
 from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, shape_argument
+from pmpm.core.transfers import StepContext
 from pmpm.errors import ParticleExitError, UnstableRunError
 
 __all__ = ["Solver", "StepOptions", "numerical_loss"]
@@ -110,11 +112,14 @@ class Solver:
         The scene's relative nodal mass cutoff (times the largest particle mass here).
     keeps_F, rotates_stress : bool
         Whether the particles keep F, and whether the objective rate rotates the stresses.
+    grid_fields : pmpm.core.fields.GridFields, optional
+        The grid's velocity fields (default one shared field; contact: one per body).
     """
 
     def __init__(self, grid, decomp, particles, materials, scheme, transfer, effects, options, n_total,
-                 mass_cutoff=0.0, keeps_F=False, rotates_stress=False):
+                 mass_cutoff=0.0, keeps_F=False, rotates_stress=False, grid_fields=None):
         self.grid, self.decomp, self.particles = grid, decomp, particles
+        self.grid_fields = grid_fields if grid_fields is not None else GridFields()
         self.comm = decomp.comm
         self.axis = decomp.axis
         self.materials = materials
@@ -170,6 +175,7 @@ class Solver:
             self.window.use_tiles(0)
         w0 = self.decomp.window[0]
         self._owned_local = np.array([self.axis, self.decomp.owned[0] - w0, self.decomp.owned[1] - w0])
+        self.grid_fields.on_window(self)
         for bind in self._hooks["on_window"]:   # boundary masks, reactions, driven nodes
             bind(self)
 
@@ -217,6 +223,13 @@ class Solver:
         w, g = self.window, self.grid
         return (w.G, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
 
+    def _step_context(self, forces=False):
+        """What the transfer sees of this step (pmpm.core.transfers.StepContext): the force
+        pass's stress and body acceleration when ``forces``."""
+        return StepContext(self.particles, self.window, self._geometry(), self.decomp.sum_halo,
+                           self.force_stress() if forces else None, self.gravity if forces else None,
+                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0))
+
     def _scratch(self, name, shape):
         arr = getattr(self, name, None)
         if arr is None or arr.shape != shape:
@@ -224,18 +237,14 @@ class Solver:
             setattr(self, name, arr)
         return arr
 
-    # -- the phases --------------------------------------------------------------------------
+    # -- the phases (the grid's share is the run's grid fields: pmpm.core.fields) --------------
     def reset_grid(self):
-        """Step 1: zero the rank's grid window (owned and ghost nodes) and choose the tiles
-        this step's node passes visit: those the particles' stencils reach (plus the halo)."""
-        self.window.reset(self.particles["x"])
+        """Step 1: zero the rank's grid window and choose the tiles this step's node passes visit."""
+        self.grid_fields.reset_grid(self)
 
     def particles_to_grid(self, momentum, forces):
         """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        self.transfer.p2g(self, momentum, forces)
-        if forces:
-            for scatter in self._hooks["scatter_forces"]:   # point loads
-                scatter(self)
+        self.grid_fields.particles_to_grid(self, momentum, forces)
 
     def force_stress(self):
         """The stress whose divergence is the internal force: the particles' stress as the
@@ -253,40 +262,20 @@ class Solver:
         return out
 
     def exchange_halo(self, fields):
-        """HALO: every rank's contributions summed in the owned and the ghost columns alike
-        (one round with each neighbour)."""
-        self.decomp.sum_halo(self.window.G[..., fields])
+        """HALO: the contributions of every rank summed (one round with each neighbour)."""
+        self.grid_fields.exchange_halo(self, fields)
 
     def update_grid(self, dt):
-        """Steps 7-8 / eq. 3-4: (mv) += f dt (with damping if asked), essential BCs (moving
-        with the ground if asked); fields become v and dv."""
-        w = self.window
-        for prescribe in self._hooks["before_grid_update"]:   # ground motion, pushover
-            prescribe(self, self.t + dt)
-        damped, reactions = K.grid_update(w.G, dt, self.mass_cutoff, w.bc_mask, w.bc_vel,
-                                          0, w.shape[0], 0, w.shape[1], self.damping, self._owned_local,
-                                          self.effects.grid_reaction(), w.tiles)
-        self.external_work += reactions  # supports are external: their work enters the balance
-        for after in self._hooks["after_grid_update"]:   # damping work, held faces
-            after(self, damped)
+        """Steps 7-8 / eq. 3-4: the momentum update with the essential BCs."""
+        self.grid_fields.update_grid(self, dt)
 
     def grid_velocity(self, source, target):
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
-        w = self.window
-        K.momentum_to_velocity(w.G, source, target, w.bc_mask, w.bc_vel,
-                               0, w.shape[0], 0, w.shape[1], w.tiles)
-        for after in self._hooks["after_grid_velocity"]:
-            after(self, target)
+        self.grid_fields.grid_velocity(self, source, target)
 
     def grid_to_particles(self, remap):
-        """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
-        also re-maps their momenta."""
-        p = self.particles
-        self._dx = self._scratch("_dx_buf", (p.n, 2))
-        vmax, bad = self.transfer.g2p(self, remap)
-        self._vmax_local, self._bad_local = vmax, bad
-        for after in self._hooks["after_g2p"]:   # held particles
-            after(self)
+        """Step 9 / eq. 5: particle velocities (and MUSL's re-map of their momenta)."""
+        self.grid_fields.grid_to_particles(self, remap)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
@@ -305,16 +294,7 @@ class Solver:
 
     def update_strain(self, dt, velocity_field, move=True):
         """Step 10 / eq. 6: strain increment, volume (and F) update, and (``move``) positions."""
-        p = self.particles
-        de, dw, F, vol0, dq = self._kinematics_outputs()
-        self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq,
-            velocity_field, self._dx if move else None, dt,
-            self.gravity, None, None, None, *self._geometry())
-        if self.interpolation == "cpgimp":
-            self._stretch_domains(de)
-        if move:
-            self._work_of_moves()
+        self.grid_fields.update_strain(self, dt, velocity_field, move)
 
     def _stretch_domains(self, de):
         """cpGIMP: each half-length follows the material's stretch along its axis, l *= 1 + de_ii
@@ -325,11 +305,7 @@ class Solver:
 
     def move_particles(self, dt):
         """Position update x += dt sum N v_i (USF: after the stress update)."""
-        p = self.particles
-        self.external_work += K.g2p_kinematics(
-            p["x"], p["m"], p["vol"], None, None, None, None, None, None, 1, self._dx, dt,
-            self.gravity, None, None, None, *self._geometry())
-        self._work_of_moves()
+        self.grid_fields.move_particles(self, dt)
 
     def _work_of_moves(self):
         """Work of the effects' forces over this step's moves (point loads)."""

@@ -20,11 +20,38 @@ from pmpm.core.kernels.affine import g2p_affine, p2g_affine
 from pmpm.core.kernels.xpic import grid_particle_grid
 from pmpm.registry import lookup
 
-__all__ = ["Transfer", "FLIP", "APIC", "XPIC", "make_transfer", "xpic_coefficients"]
+__all__ = ["StepContext", "Transfer", "FLIP", "APIC", "XPIC", "make_transfer", "xpic_coefficients"]
+
+
+class StepContext:
+    """What a transfer reads and writes of the step (built by the solver for each call).
+
+    Attributes
+    ----------
+    particles : pmpm.core.particles.Particles
+    window : pmpm.core.grid.GridWindow
+    geometry : tuple
+        The transfer kernels' grid arguments (G, ox, oy, origin, inv_h, ncx, ncy, shape).
+    sum_halo : callable
+        The halo sum of a window-sized array (one round with the neighbours; XPIC's passes).
+    stress, gravity : numpy.ndarray or None
+        The force pass's stress (the particles', as the effects edit it) and body acceleration;
+        None when the pass carries no forces (the kernels compile them out).
+    dx : numpy.ndarray or None
+        The particles' moves of the step, filled by grid-to-particles.
+    dt : float
+        The step's time step.
+    """
+
+    __slots__ = ("particles", "window", "geometry", "sum_halo", "stress", "gravity", "dx", "dt")
+
+    def __init__(self, particles, window, geometry, sum_halo, stress=None, gravity=None, dx=None, dt=0.0):
+        self.particles, self.window, self.geometry, self.sum_halo = particles, window, geometry, sum_halo
+        self.stress, self.gravity, self.dx, self.dt = stress, gravity, dx, dt
 
 
 class Transfer:
-    """Base of the transfers: ``p2g(solver, momentum, forces)`` and ``g2p(solver, remap)``;
+    """Base of the transfers: ``p2g(ctx, momentum)`` and ``g2p(ctx, remap)`` on a StepContext;
     ``from_config`` takes the transfer's own options from the scene's ``[solver]`` table and
     ``describe`` gives its line of the run header (none for the paper's FLIP)."""
 
@@ -42,10 +69,10 @@ class Transfer:
     def describe(self):
         return []
 
-    def p2g(self, s, momentum, forces):
+    def p2g(self, ctx, momentum):
         raise NotImplementedError
 
-    def g2p(self, s, remap):
+    def g2p(self, ctx, remap):
         raise NotImplementedError
 
 
@@ -61,15 +88,15 @@ class FLIP(Transfer):
     def from_config(cls, cfg):
         return cls(pic_blend=cfg.pic_blend)
 
-    def p2g(self, s, momentum, forces):
-        p = s.particles
-        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], s.force_stress() if forces else None,
-              s.gravity if forces else None, None, None, None, *s._geometry())
+    def p2g(self, ctx, momentum):
+        p = ctx.particles
+        K.p2g(p["x"], p["m"], p["v"] if momentum else None, p["vol"], ctx.stress,
+              ctx.gravity, None, None, None, *ctx.geometry)
 
-    def g2p(self, s, remap):
-        p = s.particles
-        return K.g2p_velocity(p["x"], p["m"], p["v"], self.pic_blend, *s._geometry(),
-                              remap, s._dx, s._dt_step)
+    def g2p(self, ctx, remap):
+        p = ctx.particles
+        return K.g2p_velocity(p["x"], p["m"], p["v"], self.pic_blend, *ctx.geometry,
+                              remap, ctx.dx, ctx.dt)
 
 
 class APIC(Transfer):
@@ -81,16 +108,16 @@ class APIC(Transfer):
     def describe(self):
         return ["APIC transfer (affine velocity C per particle)"]
 
-    def p2g(self, s, momentum, forces):
-        p = s.particles
+    def p2g(self, ctx, momentum):
+        p = ctx.particles
         if not momentum:   # USF's force pass: no velocity moves
-            return FLIP.p2g(self, s, False, forces)
-        p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], s.force_stress() if forces else None,
-                   s.gravity if forces else None, None, None, None, *s._geometry())
+            return FLIP.p2g(self, ctx, False)
+        p2g_affine(p["x"], p["m"], p["v"], p["C"], p["vol"], ctx.stress,
+                   ctx.gravity, None, None, None, *ctx.geometry)
 
-    def g2p(self, s, remap):
-        p = s.particles
-        return g2p_affine(p["x"], p["m"], p["v"], p["C"], *s._geometry(), remap, s._dx, s._dt_step)
+    def g2p(self, ctx, remap):
+        p = ctx.particles
+        return g2p_affine(p["x"], p["m"], p["v"], p["C"], *ctx.geometry, remap, ctx.dx, ctx.dt)
 
 
 def xpic_coefficients(order):
@@ -120,39 +147,39 @@ class XPIC(Transfer):
     def describe(self):
         return [f"XPIC({self.order}) transfer ({self.order - 1} extra grid-particle-grid passes per step)"]
 
-    def p2g(self, s, momentum, forces):
-        FLIP.p2g(self, s, momentum, forces)
+    def p2g(self, ctx, momentum):
+        FLIP.p2g(self, ctx, momentum)
 
     def _apply_bc(self, w, u):
         mask = w.bc_mask.astype(bool)
         u[mask] = w.bc_vel[mask]
         return u
 
-    def smooth(self, s, u):
+    def smooth(self, ctx, u):
         """M u = S^+ S u with the boundary values (collective: one halo round)."""
-        w, p = s.window, s.particles
+        w, p = ctx.window, ctx.particles
         out = np.zeros_like(u)
-        G, ox, oy, origin, inv_h, ncx, ncy, shape = s._geometry()
+        G, ox, oy, origin, inv_h, ncx, ncy, shape = ctx.geometry
         grid_particle_grid(p["x"], p["m"], u, out, ox, oy, origin, inv_h, ncx, ncy, shape)
-        s.decomp.sum_halo(out)
+        ctx.sum_halo(out)
         mass = w.G[..., 0:1]
         with np.errstate(divide="ignore", invalid="ignore"):
             out = np.where(mass > 0.0, out / np.where(mass > 0.0, mass, 1.0), 0.0)
         return self._apply_bc(w, out)
 
-    def g2p(self, s, remap):
-        w, p = s.window, s.particles
+    def g2p(self, ctx, remap):
+        w, p = ctx.window, ctx.particles
         G = w.G
         v_new = G[..., 1:3]
         vn = self._apply_bc(w, v_new - G[..., 3:5])   # start-of-step velocity with the BCs
         u = vn
         vstar = self.coefficients[0] * u
         for c in self.coefficients[1:]:
-            u = self.smooth(s, u)
+            u = self.smooth(ctx, u)
             vstar += c * u
         G[..., 3:5] = v_new - vn + vstar
         p["v"][...] = 0.0
-        return K.g2p_velocity(p["x"], p["m"], p["v"], 0.0, *s._geometry(), remap, s._dx, s._dt_step)
+        return K.g2p_velocity(p["x"], p["m"], p["v"], 0.0, *ctx.geometry, remap, ctx.dx, ctx.dt)
 
 
 def make_transfer(name, cfg=None, **options):

@@ -48,6 +48,8 @@ from pmpm.io._parallel import (
     validate_rows,
     write_rows,
 )
+from pmpm.io.validate import check_regular, crashes_reading
+from pmpm.io.validate import check_checkpoint_schema
 
 __all__ = ["write_checkpoint", "read_checkpoint", "checkpoint_paths", "latest_checkpoint",
            "lastgood_path"]
@@ -85,7 +87,6 @@ def _complete_step(path):
     if not os.path.exists(path):
         return None
     try:
-        from pmpm.io.validate import check_regular, crashes_reading
         check_regular(path)  # a FIFO would block HDF5's open
         if crashes_reading(_read_schema, path):  # damaged metadata can crash libhdf5 itself
             logger.warning("ignoring damaged checkpoint %s (HDF5 crashed reading it)", path)
@@ -100,7 +101,6 @@ def _complete_step(path):
 
 def _read_schema(path):
     """Every read the checks make of one checkpoint file (run in a child: it may crash)."""
-    from pmpm.io.validate import check_checkpoint_schema
     with h5py.File(path, "r") as f:
         dict(f.attrs.items())
         check_checkpoint_schema(f, LAYOUT)  # refuses links first, so the walk follows none
@@ -301,7 +301,6 @@ def read_checkpoint(path_base, comm, path=None):
     # the counts, the attributes, no links out of the file (pmpm.io.validate)
     problem = None
     if comm.Get_rank() == 0:
-        from pmpm.io.validate import check_checkpoint_schema
         try:
             with h5py.File(path, "r") as f:
                 check_checkpoint_schema(f, LAYOUT)

@@ -24,6 +24,7 @@ import numpy as np
 
 from pmpm.io import ownership
 from pmpm.io.xdmf import view_items, write_xdmf
+from pmpm.io.plot import scene_stem
 
 __all__ = ["export", "FORMATS"]
 
@@ -110,7 +111,6 @@ def export(h5_path, fmt="vtu", outdir=None):
     stem, folder = os.path.splitext(h5_path)[0], os.path.dirname(h5_path)
     if fmt not in FORMATS:
         raise ValueError(f"unknown export format {fmt!r}; valid formats: {', '.join(FORMATS)}")
-    from pmpm.io.plot import scene_stem
     # every file is claimed before it is written; a failure takes back the call's files and
     # the folders it made, so a failed export leaves nothing behind (pmpm.io.ownership)
     with ownership.writing(scene_stem(h5_path)):

@@ -77,6 +77,11 @@ from pmpm.io._parallel import (
     validate_rows,
     write_rows,
 )
+from pmpm.io.xdmf import add_frame_views, view_specs
+from pmpm.io.xdmf import write_document
+from pmpm.io.validate import check_regular
+from pmpm.io.validate import crashes_reading
+from pmpm.io.validate import check_results_schema
 
 __all__ = [
     "OutputFile",
@@ -557,7 +562,6 @@ class OutputFile:
 
     def _add_views(self, frame, time):
         """The XDMF views of one frame (every rank that touches the file, same arguments)."""
-        from pmpm.io.xdmf import add_frame_views, view_specs
         if self._view_specs is None:
             self._view_specs = view_specs(self.file)
         add_frame_views(self.file, frame, time, self._view_specs)
@@ -566,7 +570,6 @@ class OutputFile:
     def _refresh_sidecar(self):
         """Rewrite the XDMF sidecar for the frames that have views (rank 0)."""
         if self.rank == 0:
-            from pmpm.io.xdmf import write_document
             write_document(self.path, self.xdmf, self.n_total, self._view_specs, self._view_frames,
                            self._sidecar_cache)
 
@@ -832,13 +835,11 @@ def check_results_file(path):
         If the file cannot be opened as HDF5, or lacks pmpm's ``layout`` attribute
         or the ``/frames``, ``/history`` and ``/energies`` groups.
     """
-    from pmpm.io.validate import check_regular
     path = os.fspath(path)
     try:
         check_regular(path)  # a FIFO or device would block or stream forever in HDF5's open
     except OSError:
         raise ValueError("no such file") from None
-    from pmpm.io.validate import crashes_reading
     if crashes_reading(_check_results_path, path):  # damaged metadata can crash libhdf5 itself
         raise ValueError("not a usable pmpm results file: HDF5 crashed reading it (the file is damaged)")
     try:
@@ -864,7 +865,6 @@ def _check_results_path(path):
 
 def _check_results_open(f):
     """The checks of :func:`check_results_file` on the open file (ValueError)."""
-    from pmpm.io.validate import check_results_schema
     layout = f.attrs.get("layout")
     layout = layout.decode() if isinstance(layout, bytes) else layout
     if not isinstance(layout, str) or not layout.startswith("pmpm-results-"):

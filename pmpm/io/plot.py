@@ -35,6 +35,8 @@ import os
 import h5py
 import numpy as np
 
+import pmpm.physics  # noqa: F401  (registers the energy terms)
+from pmpm.core.effects import energy_terms
 from pmpm.io import schema
 from pmpm.io import ownership
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
@@ -45,9 +47,12 @@ __all__ = ["plot_results", "plot_deformed", "energy_balance_error", "energy_figu
 
 logger = logging.getLogger(__name__)
 
-STORED = ("kinetic", "strain_energy", "plastic_work", "fracture_work", "damping_work")
-#: energy that left the body: dissipated by damping or carried out by removed particles
-LEFT = ("damping_work", "viscous_damping_work", "removed_energy")
+#: energy the body holds or dissipated inside the internal work (the registered terms done
+#: inside it: plastic work, fracture work, ...), and the damping work
+STORED = ("kinetic", "strain_energy", *[t.name for t in energy_terms() if not t.outside], "damping_work")
+#: energy that left the body: dissipated by damping or carried out by removed particles (the
+#: registered energy terms done outside the internal work, pmpm.core.effects)
+LEFT = tuple(t.name for t in energy_terms() if t.outside)
 DISPLACEMENTS = ("ux", "uy", "uz")
 
 

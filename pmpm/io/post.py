@@ -8,6 +8,10 @@ import numpy as np
 from pmpm.io import ownership
 from pmpm.io.hdf5 import read_history
 from pmpm.scene.names import deformed_png, track_csv
+from pmpm.io.plot import scene_stem
+from pmpm.io import plot_results
+from pmpm.results.post import structural_outputs
+from pmpm.io import plot_deformed
 
 __all__ = ["write_history_csv", "postprocess"]
 logger = logging.getLogger(__name__)
@@ -22,7 +26,6 @@ def write_history_csv(h5_path, outdir):
     """One CSV per tracked point: ``<stem>[_<variant>]_history_<track>.csv`` with t, ux, uy,
     vx, vy (SI units)."""
     paths = []
-    from pmpm.io.plot import scene_stem
     with h5py.File(h5_path, "r") as f, ownership.writing(scene_stem(h5_path)):
         if "history" not in f:
             return paths
@@ -39,7 +42,6 @@ def write_history_csv(h5_path, outdir):
 def postprocess(scenes, h5_paths):
     """CSV histories, history/energy plots of all variants (overlaid), each variant's
     deformed-shape plot. ``scenes`` and ``h5_paths`` correspond one to one."""
-    from pmpm.io import plot_results
     outdir = scenes[0].output.directory
     made = []
     # one transaction: a foreign file met on the way takes back every file of this call
@@ -47,7 +49,6 @@ def postprocess(scenes, h5_paths):
         for path in h5_paths:
             made += write_history_csv(path, outdir)
         made += plot_results(h5_paths, outdir)
-        from pmpm.results.post import structural_outputs  # sections and reactions, if asked for
         for path in h5_paths:
             made += structural_outputs(path, outdir)
         for scene, path in zip(scenes, h5_paths):
@@ -60,7 +61,6 @@ def postprocess(scenes, h5_paths):
 
 def _deformed(h5_path, spec, outdir):
     """Deformed shape at the frame where the tracked displacement is largest."""
-    from pmpm.io import plot_deformed
     with h5py.File(h5_path, "r") as f:
         times = f["frames/time"][:]
         ht, tracks, cols = read_history(f)

@@ -10,6 +10,9 @@ particle, so mass, volume and energies are those of the 3-D body (kg, m^3, J).
 
 from __future__ import annotations
 
+import pmpm.physics  # noqa: F401  (registers the energy terms of the materials and effects)
+from pmpm.core.effects import energy_terms
+
 __all__ = ["FIELDS", "HISTORY", "ENERGIES", "meta", "UNKNOWN"]
 
 #: units of a quantity no table describes (a test asserts a real run's file has none)
@@ -65,14 +68,7 @@ ENERGIES = {
     "kinetic": ("J", "kinetic energy 1/2 m v^2"),
     "strain_energy": ("J", "recoverable elastic strain energy 1/2 sigma : C^-1 : sigma V "
                            "(not the strain field /frames/strain)"),
-    "plastic_work": ("J", "plastic work, dissipated"),
-    "fracture_work": ("J", "fracture energy dissipated by failed material points (docs/fracture.md)"),
     "internal_work": ("J", "integrated stress power: strain energy plus dissipation"),
-    "damping_work": ("J", "work done by mass-proportional damping (the mass part of Rayleigh damping), dissipated"),
-    "viscous_damping_work": ("J", "work done by the viscous stress of Rayleigh damping (its stiffness part), "
-                                  "dissipated"),
-    "removed_energy": ("J", "energy carried out of the run by particles a scene event removed (their kinetic "
-                            "energy at removal, less the internal work their fading stress did not transmit)"),
     "external_work": ("J", "work of loads, boundary motion and ground motion"),
     "total": ("J", "kinetic + internal_work + damping_work + viscous_damping_work + removed_energy; equals external_work plus the "
                    "initial kinetic energy when the run conserves energy"),
@@ -80,6 +76,9 @@ ENERGIES = {
                             "+ external_work - kinetic - strain_energy - plastic_work - damping_work; "
                             "positive is lost, negative gained"),
 }
+#: the registered energy terms (pmpm.core.effects: plastic work, damping works, removed energy,
+#: ...), each described where it is registered
+ENERGIES.update({t.name: ("J", t.meaning) for t in energy_terms()})
 
 
 def meta(table, name):

@@ -20,6 +20,8 @@ import stat
 
 import numpy as np
 
+from pmpm.files import _not_regular, read_regular  # noqa: F401  (read_regular: re-exported)
+
 __all__ = ["read_regular", "check_regular", "check_links", "check_results_schema",
            "check_checkpoint_schema", "crashes_reading", "FIELD_TRAILING"]
 
@@ -32,56 +34,6 @@ FIELD_TRAILING = {"x": (2,), "x0": (2,), "v": (2,), "stress": (4,), "back_stress
 MAX_DEPTH = 6
 #: most objects walked in one file (a results file of 10,000 frames has ~150,000 views)
 MAX_OBJECTS = 2_000_000
-
-
-def _kind(mode):
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISDIR(mode):
-        return "a folder"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
-
-
-def _not_regular(mode):
-    kind = _kind(mode)
-    return "is not a regular file" + (f" ({kind})" if kind != "not a regular file" else "")
-
-
-def read_regular(path, max_bytes):
-    """The bytes of the regular file ``path``, at most ``max_bytes`` of them.
-
-    Opened with ``O_NONBLOCK``, so opening a FIFO returns at once instead of waiting for a
-    writer; refused (ValueError) unless the open file is regular and small enough.
-    Raises OSError when the file cannot be opened.
-    """
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise ValueError(_not_regular(st.st_mode))
-        if st.st_size > max_bytes:
-            raise ValueError(f"larger than {_size(max_bytes)}")
-        chunks, left = [], max_bytes + 1
-        while left > 0:
-            chunk = os.read(fd, min(left, 1 << 20))
-            if not chunk:
-                break
-            chunks.append(chunk)
-            left -= len(chunk)
-        raw = b"".join(chunks)
-    finally:
-        os.close(fd)
-    if len(raw) > max_bytes:
-        raise ValueError(f"larger than {_size(max_bytes)}")
-    return raw
-
-
-def _size(n):
-    return f"{n >> 20} MB" if n >= 1 << 20 else f"{n >> 10} KB"
 
 
 def check_regular(path):

@@ -36,6 +36,7 @@ import xml.etree.ElementTree as ET
 
 import h5py
 import numpy as np
+from pmpm.io.ownership import xdmf_marker
 
 __all__ = ["write_xdmf", "write_views", "add_frame_views", "view_specs", "write_document", "sidecar_path",
            "xdmf_number_type", "VIEWS"]
@@ -297,7 +298,6 @@ def write_document(h5_path, xdmf_path, n_total, specs, frames, cache=None):
         parts.append(text)
     parts.append(_TAIL)
     # the marker on the second line tells pmpm this sidecar is its own (pmpm.io.ownership)
-    from pmpm.io.ownership import xdmf_marker
     parts[0] = _HEAD.replace("\n", "\n" + xdmf_marker(os.path.basename(h5_path)) + "\n", 1)
     tmp = f"{xdmf_path}.tmp"
     with open(tmp, "w", encoding="utf-8") as fh:

@@ -1,8 +1,9 @@
 """Contact between bodies with friction: separate velocity fields per body.
 
-The default solver maps every particle to one nodal velocity field, so bodies whose shape
-function supports overlap share nodal velocities and stick together. With a ``[contact]``
-section the scene runs :class:`ContactSolver` instead, the multi-velocity-field algorithm of
+The default grid fields (pmpm.core.fields.GridFields) map every particle to one nodal velocity
+field, so bodies whose shape function supports overlap share nodal velocities and stick
+together. With a ``[contact]`` section the run's grid fields are :class:`BodyFields` instead
+(the solver's grid phases delegate to them), the multi-velocity-field algorithm of
 Bardenhagen, Brackbill & Sulsky (2000) and Bardenhagen et al. (2001):
 
 * each contact body (``contact.bodies``, default every body; the bodies not named share one
@@ -19,14 +20,14 @@ Bardenhagen, Brackbill & Sulsky (2000) and Bardenhagen et al. (2001):
   held surfaces build up), and on the updated velocities, by the same amount on the velocity
   change FLIP adds to the particles. The velocities from which USF and MUSL take the strain
   increment are corrected the same way;
-* each slot's nodal update is the base solver's own (``Solver.update_grid`` and
-  ``Solver.grid_velocity`` run on each slot as if it were the single field: BCs, damping,
+* each slot's nodal update is the single field's own (``GridFields.update_grid`` and
+  ``GridFields.grid_velocity`` run on each slot as if it were the single field: BCs, damping,
   moving supports and their energy accounting included);
 * grid to particles, the MUSL re-map, the strain increment and the position update use each
   particle's own slot.
 
 Everything else (materials, loads, migration, output, the schemes' ordering of the phases) is
-the base :class:`~pmpm.core.solver.Solver`'s. The per-body fields, mass gradient included, go through
+the solver's (:class:`~pmpm.core.solver.Solver`). The per-body fields, mass gradient included, go through
 the same halo accumulate/fill as the single field. Without ``[contact]`` none of this is
 imported or run.
 """
@@ -35,9 +36,9 @@ import logging
 import numpy as np
 
 from pmpm.core.kernels import contact as KC
-from pmpm.core.solver import Solver
+from pmpm.core.fields import GridFields
 
-__all__ = ["ContactSolver", "contact_slots"]
+__all__ = ["BodyFields", "contact_slots"]
 logger = logging.getLogger(__name__)
 
 #: first single-field index (pmpm.core.kernels) that the body layout shifts to make room for the
@@ -66,42 +67,40 @@ def _field(f):
     return f if f < _FIRST_SHIFTED else f + _SHIFT
 
 
-class ContactSolver(Solver):
-    """Explicit MPM with one velocity field per contact body (scene ``[contact]``).
+class BodyFields(GridFields):
+    """One velocity field per contact body (scene ``[contact]``): the grid phases of the solver
+    ``s`` on the body window ``B``.
 
     Parameters
     ----------
-    *parts : the parts of pmpm.core.solver.Solver (pmpm.build.build_solver)
     friction : float
         Coulomb friction coefficient (``contact.friction``).
     slot_of, n_slots : the velocity field of each body and their number (``contact_slots``)
-    **kwargs : the options of pmpm.core.solver.Solver
     """
 
-    def __init__(self, *parts, friction, slot_of, n_slots, **kwargs):
+    def __init__(self, friction, slot_of, n_slots):
         self.friction = float(friction)
         self.slot_of, self.n_slots = slot_of, n_slots
         self.corrections = 0  # (node, slot) corrections on this rank, ghosts included
-        super().__init__(*parts, **kwargs)
+        self.B = None
 
     def describe(self):
-        """The run header's lines of the physics this solver adds."""
+        """The run header's line of the physics these fields add."""
         return [f"contact with friction {self.friction:g} ({self.n_slots} velocity fields)"]
 
-    def _load_args(self):
+    def _load_args(self, s):
         """(gravity, load_id, load_w, load_vec) of the loads effect for the body kernels, which
         take every load in their particle loop (None where absent)."""
-        loads = self.effect("loads")
-        return loads.kernel_args(self.particles, self.t) if loads is not None else (None,) * 4
+        loads = s.effect("loads")
+        return loads.kernel_args(s.particles, s.t) if loads is not None else (None,) * 4
 
     # -- the body window ---------------------------------------------------------------------
-    def _build_window(self):
-        super()._build_window()
-        self.B = np.zeros((*self.window.shape, self.n_slots, KC.N_BODY_FIELDS))
+    def on_window(self, s):
+        self.B = np.zeros((*s.window.shape, self.n_slots, KC.N_BODY_FIELDS))
 
-    def _body_geometry(self):
-        w, g = self.window, self.grid
-        return (self.B, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
+    def _body_geometry(self, s):
+        w, g = s.window, s.grid
+        return (self.B, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
 
     def _halo_views(self, fields):
         """Views of ``B`` for the single-field slice ``fields``: those fields of every slot; the
@@ -115,71 +114,71 @@ class ContactSolver(Solver):
             views.append(self.B[..., KC.GRAD:KC.GRAD + 2])
         return views
 
-    def _per_slot(self, phase, *args):
-        """Run a base-solver grid phase on each slot as if it were the single field."""
-        w = self.window
+    def _per_slot(self, phase, s, *args):
+        """Run a single-field grid phase on each slot as if it were the single field."""
+        w = s.window
         G = w.G
         try:
-            for s in range(self.n_slots):
-                w.G = self.B[:, :, s]
-                phase(*args)
+            for k in range(self.n_slots):
+                w.G = self.B[:, :, k]
+                phase(s, *args)
         finally:
             w.G = G
 
-    def _contact(self, vf, dvf, momentum=False):
-        w = self.window
+    def _contact(self, s, vf, dvf, momentum=False):
+        w = s.window
         if self.n_slots > 1:
-            self.corrections += KC.contact_update(self.B, vf, dvf, momentum, self.mass_cutoff,
+            self.corrections += KC.contact_update(self.B, vf, dvf, momentum, s.mass_cutoff,
                                                   self.friction, w.bc_mask, 0, w.shape[0], 0, w.shape[1])
 
     # -- the phases that differ -----------------------------------------------------------------
-    def reset_grid(self):
+    def reset_grid(self, s):
         self.B.fill(0.0)
 
-    def particles_to_grid(self, momentum, forces):
-        p = self.particles
-        gravity, load_id, load_w, load_vec = self._load_args() if forces else (None,) * 4
+    def particles_to_grid(self, s, momentum, forces):
+        p = s.particles
+        gravity, load_id, load_w, load_vec = self._load_args(s) if forces else (None,) * 4
         KC.p2g_bodies(p["x"], p["m"], p["v"] if momentum else None, p["vol"],
-                      self.force_stress() if forces else None, p["body"], self.slot_of,
-                      gravity, load_id, load_w, load_vec, *self._body_geometry())
+                      s.force_stress() if forces else None, p["body"], self.slot_of,
+                      gravity, load_id, load_w, load_vec, *self._body_geometry(s))
 
-    def exchange_halo(self, fields):
+    def exchange_halo(self, s, fields):
         for view in self._halo_views(fields):
-            self.decomp.sum_halo(view)
+            s.decomp.sum_halo(view)
 
-    def update_grid(self, dt):
+    def update_grid(self, s, dt):
         """Contact correction of the mapped momenta, each slot's momentum update with its BCs,
         then the contact correction of the new velocities and of the velocity changes."""
-        self._contact(KC.MOM, -1, momentum=True)
-        self._per_slot(super().update_grid, dt)
-        self._contact(KC.MOM, KC.FORCE)
+        self._contact(s, KC.MOM, -1, momentum=True)
+        self._per_slot(super().update_grid, s, dt)
+        self._contact(s, KC.MOM, KC.FORCE)
 
-    def grid_velocity(self, source, target):
+    def grid_velocity(self, s, source, target):
         """Each slot's v = (mv)/m with its BCs, then the contact correction (the velocity from
         which USF and MUSL take the strain increment)."""
-        self._per_slot(super().grid_velocity, _field(source), _field(target))
-        self._contact(_field(target), -1)
+        self._per_slot(super().grid_velocity, s, _field(source), _field(target))
+        self._contact(s, _field(target), -1)
 
-    def grid_to_particles(self, remap):
-        p = self.particles
-        self._dx = self._scratch("_dx_buf", (p.n, 2))
+    def grid_to_particles(self, s, remap):
+        p = s.particles
+        s._dx = s._scratch("_dx_buf", (p.n, 2))
         vmax, bad = KC.g2p_velocity_bodies(p["x"], p["m"], p["v"], p["body"], self.slot_of,
-                                           self.transfer.pic_blend, *self._body_geometry(),
-                                           remap, self._dx, self._dt_step)
-        self._vmax_local, self._bad_local = vmax, bad
+                                           s.transfer.pic_blend, *self._body_geometry(s),
+                                           remap, s._dx, s._dt_step)
+        s._vmax_local, s._bad_local = vmax, bad
 
-    def update_strain(self, dt, velocity_field, move=True):
-        p = self.particles
-        de, dw, F, vol0, dq = self._kinematics_outputs()
-        gravity, load_id, load_w, load_vec = self._load_args()
-        self.external_work += KC.g2p_kinematics_bodies(
+    def update_strain(self, s, dt, velocity_field, move=True):
+        p = s.particles
+        de, dw, F, vol0, dq = s._kinematics_outputs()
+        gravity, load_id, load_w, load_vec = self._load_args(s)
+        s.external_work += KC.g2p_kinematics_bodies(
             p["x"], p["m"], p["vol"], p.fields.get("strain"), de, dw, F, vol0, dq, p["body"], self.slot_of,
-            _field(velocity_field), self._dx if move else None, dt,
-            gravity, load_id, load_w, load_vec, *self._body_geometry())
+            _field(velocity_field), s._dx if move else None, dt,
+            gravity, load_id, load_w, load_vec, *self._body_geometry(s))
 
-    def move_particles(self, dt):
-        p = self.particles
-        gravity, load_id, load_w, load_vec = self._load_args()
-        self.external_work += KC.g2p_kinematics_bodies(
+    def move_particles(self, s, dt):
+        p = s.particles
+        gravity, load_id, load_w, load_vec = self._load_args(s)
+        s.external_work += KC.g2p_kinematics_bodies(
             p["x"], p["m"], p["vol"], None, None, None, None, None, None, p["body"], self.slot_of,
-            KC.MOM, self._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry())
+            KC.MOM, s._dx, dt, gravity, load_id, load_w, load_vec, *self._body_geometry(s))

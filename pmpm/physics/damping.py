@@ -1,80 +1,14 @@
-"""Rayleigh damping given as a ratio of critical damping at two periods.
-
-``[loads] damping = {ratio = 0.02, periods = [T1, T2]}`` asks for the damping matrix
-C = a0 M + a1 K that damps the modes of periods T1 and T2 at ``ratio``:
-
-    xi(omega) = a0 / (2 omega) + a1 omega / 2,     omega_k = 2 pi / T_k,
-    a0 = 2 xi omega1 omega2 / (omega1 + omega2),   a1 = 2 xi / (omega1 + omega2)
-
-(Chopra, *Dynamics of Structures*, section 11.4). Modes between T1 and T2 are damped a little
-less, modes outside a little (mass part, long periods) or much (stiffness part, short periods)
-more.
-
-How each part acts in the step:
-
-- mass part: the nodal force -a0 m v of the plain mass-proportional damping (the grid update
-  kernel, pmpm/core/kernels/grid_ops.py); its work is ``damping_work``;
-- stiffness part: a viscous stress on every particle, sigma_v = a1 C : D (C the material's
-  elastic tangent, D = de / dt the rate of deformation), added to the stress in the internal
-  force (pmpm/core/kernels/damping.py); its work sum V sigma_v : de is ``viscous_damping_work``.
-  The viscous stress of a step is the previous step's rate (an explicit step knows no other):
-  its force and its work use the same value, so the energy balance closes with it.
-
-The stiffness part lowers the stable time step. An explicit step on a mode of circular
-frequency omega damped at xi is stable for dt <= (2 / omega) (sqrt(1 + xi^2) - xi) (Belytschko,
-Liu & Moran, *Nonlinear Finite Elements*, section 6.2). The grid's highest mode is the one the
-undamped CFL limit C_u stands for, omega_max = 2 c / (C_u h) (c the wave speed), and the viscous
-stress damps it at xi_max = a1 omega_max / 2 = a1 c / (C_u h). The step is therefore
-C h / c times ``stable_step_factor`` = min(1, C_u (sqrt(1 + xi_max^2) - xi_max)), with C_u the
-undamped limits docs/accuracy.md measured on the bar (cubic 2.57, quadratic 2.31, linear 1.69,
-point interpolation), taken about 3% lower; 1 for the domain interpolations (not measured).
-Measured on the cantilever of tests/unit/test_damping.py (a1 c / h = 3.4, CFL 0.9): 1.1 times
-the step this rule gives runs, 1.2 times diverges within 120 steps. A scene that damps a short
-period on a fine grid pays for it in steps; docs/effects.md gives figures.
+"""Mass-proportional damping: ``[loads] damping = alpha`` (1/s), the nodal force -alpha m v of
+the grid update (pmpm/core/kernels/grid_ops.py); its work is ``damping_work``. A mode of
+circular frequency omega is damped at alpha / (2 omega) of critical.
 """
-import math
-
-import numpy as np
-
 from pmpm.core.effects import Effect, register_energy
-from pmpm.core.kernels.damping import add_viscous, viscous_stress
 
-__all__ = ["MassDamping", "RayleighDamping", "rayleigh_coefficients", "ratio_at", "undamped_cfl_limit"]
+__all__ = ["MassDamping", "DAMPING_WORK"]
 
-#: the energy terms of damping (J), dissipated
+#: the energy mass-proportional damping dissipates (J; Rayleigh damping's mass part adds to it)
 DAMPING_WORK = register_energy(
     "damping_work", "work done by mass-proportional damping (the mass part of Rayleigh damping), dissipated")
-VISCOUS_DAMPING_WORK = register_energy(
-    "viscous_damping_work", "work done by the viscous stress of Rayleigh damping (its stiffness part), "
-                            "dissipated")
-
-#: the undamped CFL limits of docs/accuracy.md (bar, MUSL, point interpolation), about 3% lower
-UNDAMPED_CFL_LIMIT = {"cubic": 2.5, "quadratic": 2.25, "linear": 1.65}
-
-
-def undamped_cfl_limit(shape_function, interpolation):
-    """C_u of the stable-step rule (module doc): measured for point interpolation, 1 else."""
-    return UNDAMPED_CFL_LIMIT.get(shape_function, 1.0) if interpolation == "point" else 1.0
-
-
-def rayleigh_coefficients(ratio, periods):
-    """(a0 in 1/s, a1 in s) that damp the two ``periods`` (s) at ``ratio`` of critical.
-
-    Parameters
-    ----------
-    ratio : float
-        Damping ratio, 0 <= ratio <= 1.
-    periods : pair of float
-        T1, T2 > 0 (s); equal periods give the pair that damps that one period at ``ratio``
-        with half of it from each part.
-    """
-    w1, w2 = (2 * math.pi / T for T in periods)
-    return 2 * ratio * w1 * w2 / (w1 + w2), 2 * ratio / (w1 + w2)
-
-
-def ratio_at(a0, a1, omega):
-    """Damping ratio of a mode of circular frequency ``omega`` (rad/s): a0/(2 w) + a1 w/2."""
-    return a0 / (2 * omega) + a1 * omega / 2
 
 
 class MassDamping(Effect):
@@ -87,7 +21,7 @@ class MassDamping(Effect):
     @classmethod
     def create(cls, scene, setup):
         alpha = scene.loads.damping
-        return cls(alpha) if alpha and not scene.loads.rayleigh else None
+        return cls(alpha) if alpha else None
 
     def __init__(self, alpha):
         self.nodal_damping = alpha
@@ -98,101 +32,3 @@ class MassDamping(Effect):
 
     def describe(self):
         return [f"mass-proportional damping ({self.nodal_damping:g} 1/s)"]
-
-
-class RayleighDamping(Effect):
-    """Rayleigh damping by ratio (effect ``rayleigh_damping``): its mass part is the nodal
-    mass-proportional damping (``damping_work``), its stiffness part the viscous stress on the
-    particles (``viscous_damping_work``) and a shorter stable step.
-
-    Parameters
-    ----------
-    config : dict
-        ``{"ratio": xi, "periods": (T1, T2)}`` from the scene (pmpm.scene.config).
-    materials : list of pmpm.physics.materials.Material
-    """
-
-    #: the particle field holding the viscous stress (sxx, syy, sxy); it migrates and is
-    #: checkpointed with the particle like any field
-    FIELD = "viscous_stress"
-
-    name = "rayleigh_damping"
-    energy_terms = (DAMPING_WORK, VISCOUS_DAMPING_WORK)
-
-    @classmethod
-    def create(cls, scene, setup):
-        config = scene.loads.rayleigh
-        return cls(config, setup.materials, undamped_cfl_limit(setup.shape_function, setup.interpolation)) \
-            if config else None
-
-    def __init__(self, config, materials, undamped_limit=1.0):
-        self.ratio = config["ratio"]
-        self.periods = tuple(config["periods"])
-        self.a0, self.a1 = rayleigh_coefficients(self.ratio, self.periods)
-        self.materials = materials
-        self.undamped_limit = undamped_limit
-        self.nodal_damping = self.a0 or None   # None compiles the grid's damping out
-        self.damping_work = 0.0          # this rank's share of the mass part's dissipation (J)
-        self.viscous_damping_work = 0.0  # this rank's share of the stiffness part's (J)
-
-    @property
-    def work(self):
-        """This rank's share of the stiffness part's dissipation (J)."""
-        return self.viscous_damping_work
-
-    @work.setter
-    def work(self, value):
-        self.viscous_damping_work = value
-
-    @property
-    def stiffness(self):
-        """True if the stiffness part is not zero (ratio > 0)."""
-        return self.a1 > 0
-
-    def stable_step_factor(self, wave_speed, h, undamped_limit):
-        """min(1, C_u (sqrt(1 + xi^2) - xi)), xi = a1 c / (C_u h): the CFL step's reduction
-        (module doc); ``undamped_limit`` is C_u (``undamped_cfl_limit``)."""
-        xi = self.a1 * wave_speed / (undamped_limit * h)
-        return min(1.0, undamped_limit * (math.sqrt(1 + xi * xi) - xi))
-
-    def add_fields(self, particles, setup=None):
-        """Give the particles their viscous stress (zero at the start)."""
-        particles.add_field(self.FIELD, (3,))
-
-    def force_stress(self, stress, sv, out):
-        """The stress the internal force takes: ``stress`` + ``sv`` into ``out`` (N, 3)."""
-        add_viscous(stress, sv, out)
-        return out
-
-    def update(self, particles, de, dt):
-        """After the step's strain increment ``de``: the viscous stress's work over the step
-        (added to ``work``) and the new viscous stress (a1 / dt) C de."""
-        p = particles
-        several = len(self.materials) > 1
-        for k, m in enumerate(self.materials):
-            self.work += viscous_stress(p[self.FIELD], de, p["vol"], dt, self.a1, m.E, m.nu,
-                                        m.plane_strain, p["mat"], k if several else -1)
-
-    # -- effect hooks
-    def limit_dt(self, dt, speed, s):
-        """The viscous stress shortens the stable step (module doc)."""
-        return dt * self.stable_step_factor(speed, s.grid.h, self.undamped_limit)
-
-    def edits_force_stress(self, t):
-        return True
-
-    def add_force_stress(self, s, out):
-        """The viscous stress joins the stress of the internal force."""
-        self.force_stress(out, s.particles[self.FIELD], out)
-
-    def after_grid_update(self, s, damped_work):
-        self.damping_work += damped_work
-
-    def after_stress_update(self, s):
-        self.update(s.particles, s._de, s._dt_step)
-
-    def describe(self):
-        """The start-up log's effect line."""
-        T1, T2 = self.periods
-        return [f"Rayleigh damping {self.ratio:g} of critical at T = {T1:g} s and {T2:g} s "
-                f"(a0 = {self.a0:.4g} 1/s on the nodes, a1 = {self.a1:.4g} s viscous stress)"]

@@ -14,6 +14,7 @@ import numpy as np
 
 from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
+from pmpm.files import read_regular
 from pmpm.physics.boundary import select_nodes
 
 __all__ = ["GroundMotion", "read_record"]
@@ -28,7 +29,6 @@ MAX_RECORD_BYTES = 64 << 20
 
 def _read_text(path):
     """The file as text; refuses devices, huge and non-UTF-8 files (never quoting them)."""
-    from pmpm.io.validate import read_regular
     raw = read_regular(path, MAX_RECORD_BYTES)  # non-blocking: a FIFO is refused, not waited on
     try:
         return raw.decode("utf-8")

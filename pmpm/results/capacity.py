@@ -42,6 +42,8 @@ import numpy as np
 
 from pmpm.io import ownership
 from pmpm.results.hinges import hinge_rows
+from pmpm.io.hdf5 import read_energies, read_history
+from pmpm.results.recorder import read_tables
 
 __all__ = ["capacity_curve", "write_capacity", "pushover_spec"]
 logger = logging.getLogger(__name__)
@@ -68,8 +70,6 @@ def capacity_curve(h5_path, spec=None):
         ``initial_stiffness`` (N/m, NaN without quasi-static elastic samples),
         ``peak_base_shear`` (N), ``max_kinetic_ratio`` (after the first ramp).
     """
-    from pmpm.io.hdf5 import read_energies, read_history
-    from pmpm.results.post import read_tables
     spec = spec or pushover_spec(h5_path)
     with h5py.File(h5_path, "r") as f:
         scene = json.loads(f.attrs["scene"])

@@ -12,22 +12,13 @@ import h5py
 import numpy as np
 
 from pmpm.io import ownership
-from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS
+from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS, read_tables
+from pmpm.io.plot import scene_stem
+from pmpm.results import plots
+from pmpm.results.capacity import write_capacity
 
 __all__ = ["read_tables", "write_csv", "structural_outputs"]
 logger = logging.getLogger(__name__)
-
-
-def read_tables(h5_path):
-    """{"sections": {name: {column: array, "attrs": dict}}, "reactions": {...}}."""
-    out = {"sections": {}, "reactions": {}}
-    with h5py.File(h5_path, "r") as f:
-        for group in out:
-            for name, g in f.get(group, {}).items():
-                table = {c: g[c][()] for c in g}
-                table["attrs"] = {k: v for k, v in g.attrs.items()}
-                out[group][name] = table
-    return out
 
 
 def write_csv(h5_path, outdir, tables=None):
@@ -35,7 +26,6 @@ def write_csv(h5_path, outdir, tables=None):
     tables = tables or read_tables(h5_path)
     stem = os.path.splitext(os.path.basename(h5_path))[0]
     paths = []
-    from pmpm.io.plot import scene_stem
     with ownership.writing(scene_stem(h5_path)):  # claimed before written (pmpm.io.ownership)
         for group, kind, columns in (("sections", "section", SECTION_COLUMNS),
                                      ("reactions", "reaction", REACTION_COLUMNS)):
@@ -56,11 +46,9 @@ def _hysteresis_spec(h5_path):
 
 def structural_outputs(h5_path, outdir):
     """CSV files and plots of the structural results of one run (nothing if it has none)."""
-    from pmpm.results import plots
     tables = read_tables(h5_path)
     if not tables["sections"] and not tables["reactions"]:
         return []
-    from pmpm.io.plot import scene_stem
     stem = os.path.splitext(os.path.basename(h5_path))[0]
 
     def png(kind):  # claimed before it is drawn (pmpm.io.ownership)
@@ -75,7 +63,6 @@ def structural_outputs(h5_path, outdir):
                 made.append(plots.plot_hinge_map(h5_path, tables["sections"], png("hinges"), stem))
         if tables["reactions"]:
             made.append(plots.plot_reactions(tables["reactions"], png("reactions"), stem))
-            from pmpm.results.capacity import write_capacity  # a pushover's capacity curve
             made += write_capacity(h5_path, outdir)
         spec = _hysteresis_spec(h5_path)
         if spec and tables["reactions"]:

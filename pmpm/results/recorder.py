@@ -7,9 +7,10 @@ Rows are buffered and written with the other histories (``/sections/<name>`` and
 """
 import logging
 
+import h5py
 import numpy as np
 
-__all__ = ["StructuralRecorder", "SECTION_COLUMNS", "REACTION_COLUMNS", "UNITS"]
+__all__ = ["StructuralRecorder", "read_tables", "SECTION_COLUMNS", "REACTION_COLUMNS", "UNITS"]
 logger = logging.getLogger(__name__)
 
 SECTION_COLUMNS = ("time", "N", "V", "M")
@@ -128,3 +129,15 @@ class StructuralRecorder:
         for k, name in enumerate(self.reaction_names):
             out[f"reactions/{name}"] = dict(zip(REACTION_COLUMNS, (t, *rea[:, k].T)))
         return out
+
+
+def read_tables(h5_path):
+    """{"sections": {name: {column: array, "attrs": dict}}, "reactions": {...}}."""
+    out = {"sections": {}, "reactions": {}}
+    with h5py.File(h5_path, "r") as f:
+        for group in out:
+            for name, g in f.get(group, {}).items():
+                table = {c: g[c][()] for c in g}
+                table["attrs"] = {k: v for k, v in g.attrs.items()}
+                out[group][name] = table
+    return out

@@ -3,6 +3,7 @@ controlled push, pmpm.physics.pushover) and ``[[events]]`` (bodies removed durin
 pmpm.physics.events). Each returns plain data for the frozen Scene; nothing here runs physics.
 """
 from pmpm.errors import ConfigError
+from pmpm.physics.pushover import PUSHED_COMPONENT
 
 __all__ = ["parse_pushover", "parse_events"]
 
@@ -13,7 +14,6 @@ def parse_pushover(t, scene):
     Returns a dict, or None without the table."""
     if t is None:
         return None
-    from pmpm.physics.pushover import PUSHED_COMPONENT
     name = t.string("boundary")
     match = [b for b in scene.boundaries if b.name == name]
     if not match:

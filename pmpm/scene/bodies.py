@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from pmpm.errors import ConfigError
+from pmpm.scene.expressions import parse_expression
 
 __all__ = ["generate_body", "body_points", "inside_body", "check_overlaps"]
 logger = logging.getLogger(__name__)
@@ -242,7 +243,6 @@ def check_overlaps(bodies, points_of, h):
 def _initial_velocity(body, pts, key):
     """The body's velocity entries (numbers, or expressions in x, y parsed by
     :mod:`pmpm.scene.expressions`, never run as code) at its points; non-finite refused."""
-    from pmpm.scene.expressions import parse_expression
     v = np.zeros((len(pts), 2))
     for d, entry in enumerate(body.velocity):
         if isinstance(entry, str):

@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from pmpm.errors import ConfigError
+from pmpm.files import read_regular
 from pmpm.physics.materials import make_material
 from pmpm.scene.expressions import parse_expression
 from pmpm.scene.limits import check_memory, check_time_step
@@ -23,6 +24,9 @@ from pmpm.scene.names import check_name, check_output_directory, check_output_fi
 from pmpm.scene.tables import MAX_MAGNITUDE, REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
 from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
+from pmpm.scene.frame import expand_frame
+from pmpm.scene.grid import GridConfig, parse_grid
+from pmpm.scene.analyses import parse_events, parse_pushover
 
 __all__ = ["Scene", "load_scene", "resolve_scenes", "check_run_names", "check_written_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
 logger = logging.getLogger(__name__)
@@ -34,13 +38,6 @@ BC_TYPES = ("fixed", "roller_x", "roller_y", "velocity")
 BOUNDARY_FACES = ("left", "right", "bottom", "top")
 FORMULATIONS = ("plane_stress", "plane_strain")
 PARTICLE_FIELDS = ("x", "x0", "v", "m", "vol", "stress", "strain", "F", "mat", "body")
-
-
-@dataclass(frozen=True)
-class GridConfig:
-    origin: tuple
-    cell_size: float
-    cells: tuple
 
 
 @dataclass(frozen=True)
@@ -82,7 +79,7 @@ class LoadsConfig:
     forces: tuple
     ground_motion: Optional[dict] = None   # base acceleration record on the fixed nodes
     damping: float = 0.0                   # mass-proportional damping coefficient (1/s)
-    rayleigh: Optional[dict] = None        # {ratio, periods}: Rayleigh damping (pmpm.physics.damping)
+    rayleigh: Optional[dict] = None        # {ratio, periods}: Rayleigh damping (pmpm.physics.rayleigh)
 
 
 @dataclass(frozen=True)
@@ -195,29 +192,6 @@ class Scene:
 
 
 # -- sections -------------------------------------------------------------------------------
-
-#: most cells along one axis: node indices and counts stay far inside int32/int64 arithmetic
-MAX_CELLS_PER_AXIS = 2 ** 31 - 2
-
-
-def _grid(t):
-    g = GridConfig(origin=t.vector("origin", (0.0, 0.0)),
-                   cell_size=t.number("cell_size", low=0, low_open=True),
-                   cells=t.int_vector("cells", low=3))
-    if max(g.cells) > MAX_CELLS_PER_AXIS:
-        raise ConfigError(t.path("cells"), f"at most {MAX_CELLS_PER_AXIS} cells per axis (integer range)")
-    for d in range(2):
-        upper = g.origin[d] + g.cell_size * g.cells[d]
-        if not (math.isfinite(upper) and abs(upper) <= MAX_MAGNITUDE):  # squared in the set-up
-            raise ConfigError(t.path("cells"), f"the grid's extent (cells x cell_size) is not a finite "
-                                               f"number of at most {MAX_MAGNITUDE:g}")
-        # positions must resolve the cell size: x + h must differ from x across the whole grid
-        if g.cell_size < 1e-9 * max(abs(g.origin[d]), abs(upper)):
-            raise ConfigError(t.path("cell_size"), "too small for the grid's coordinates "
-                                                   "(below 1e-9 of their magnitude)")
-    t.finish()
-    return g
-
 
 def _finite(value):
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
@@ -546,7 +520,7 @@ def _loads(root):
 
 def _damping(t):
     """``[loads] damping``: a mass-proportional coefficient (1/s), or a table
-    ``{ratio = xi, periods = [T1, T2]}`` asking for Rayleigh damping (pmpm.physics.damping).
+    ``{ratio = xi, periods = [T1, T2]}`` asking for Rayleigh damping (pmpm.physics.rayleigh).
     Returns (mass coefficient, Rayleigh dict or None); a ratio of 0 is no damping."""
     if not isinstance(t.data.get("damping"), dict):
         return t.number("damping", 0.0, low=0.0, magnitude=MAX_MAGNITUDE), None
@@ -726,7 +700,6 @@ def _contact(t, bodies):
 
 
 def _materials(root, formulation):
-    from pmpm.physics.materials import make_material
     t = root.table("materials")
     if not t.data:
         raise ConfigError("materials", "empty: define at least one [materials.<label>] table")
@@ -746,14 +719,13 @@ def parse_scene(data, path="<scene>"):
     cuts and tracked points (:func:`pmpm.scene.frame.expand_frame`): nothing after this line
     knows about frames."""
     if isinstance(data, dict) and "frame" in data:
-        from pmpm.scene.frame import expand_frame
         data = expand_frame(data)
     root = Table(data, "")
     title = root.string("title", os.path.basename(path))
     formulation = root.string("formulation", "plane_stress", choices=FORMULATIONS)
     thickness = root.number("thickness", 1.0, low=0, low_open=True)
     ppc = root.integer("particles_per_cell", 2, low=1, high=8)
-    grid = _grid(root.table("grid"))
+    grid = parse_grid(root.table("grid"))
     materials, state_fields = _materials(root, formulation)
     solver = _solver(root.table("solver"))
     stem = os.path.splitext(os.path.basename(path))[0]
@@ -782,7 +754,6 @@ def parse_scene(data, path="<scene>"):
     if scene.contact is not None and solver.interpolation != "point":
         raise ConfigError("solver.interpolation", "the contact solver's kernels use point B-splines only")
     _check_hysteresis(scene)
-    from pmpm.scene.analyses import parse_events, parse_pushover
     scene = dataclasses.replace(scene, pushover=parse_pushover(root.table("pushover", None), scene))
     scene = dataclasses.replace(scene, events=parse_events(root, scene))
     if scene.output.directory is None:
@@ -840,7 +811,6 @@ MAX_SCENE_BYTES = 1 << 20
 def read_toml(path):
     """Read a TOML file; unreadable, oversized, non-UTF-8 or malformed files are a ConfigError
     naming the file (the reason never quotes the file's contents)."""
-    from pmpm.io.validate import read_regular
     try:  # non-blocking open: a FIFO given as the scene is refused, never waited on
         raw = read_regular(path, MAX_SCENE_BYTES)
     except OSError as exc:

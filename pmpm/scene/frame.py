@@ -33,6 +33,9 @@ from dataclasses import dataclass
 from pmpm.errors import ConfigError
 from pmpm.scene.sections import closest, lookup
 from pmpm.scene.tables import Table
+from pmpm.physics.timefunctions import parse_time_function
+from pmpm.scene.names import check_name
+from pmpm.scene.grid import parse_grid
 
 __all__ = ["expand_frame", "frame_report", "SUPPORT_TYPES", "I_SECTION_KEYS"]
 logger = logging.getLogger(__name__)
@@ -128,7 +131,6 @@ def _strip(t, explicit, axis):
 
 def _member_table(t, nodes, explicit, materials, default_material, cut_offset, tol):
     """The members, each oriented lower/left to upper/right, with its strip and cut offsets."""
-    from pmpm.physics.timefunctions import parse_time_function
     members = []
     for k, m in enumerate(t.tables("members")):
         name = m.string("name")
@@ -288,7 +290,6 @@ def _supports(t, nodes, members, joints, grid):
 
 def _nodal_loads(t, nodes, joints, tol):
     """A nodal load on the particles of the node's panel (a second load on a node gets its index)."""
-    from pmpm.physics.timefunctions import parse_time_function
     out = []
     for k, f in enumerate(t.tables("loads")):
         node = _node_ref(f, "node", nodes)
@@ -376,7 +377,6 @@ def _cuts(members, geo, nodes, tol):
 
 def _check_names(expanded, key):
     """Derived names must be unique where the scene needs them so (files, lookups)."""
-    from pmpm.scene.names import check_name
     for group, what in (("output.section", "section cut"), ("output.track", "tracked point"),
                         ("boundary", "support")):
         head, _, tail = group.partition(".")
@@ -396,10 +396,9 @@ def _check_names(expanded, key):
 
 def _read(data):
     """Grid and frame tables of scene ``data`` (the grid as the scene parses it)."""
-    from pmpm.scene.config import _grid
     if not isinstance(data.get("frame"), dict):
         raise ConfigError("frame", "must be a table")
-    grid = _grid(Table(data.get("grid", {}), "grid"))
+    grid = parse_grid(Table(data.get("grid", {}), "grid"))
     materials = data.get("materials", {})
     return grid, Table(data["frame"], "frame"), materials if isinstance(materials, dict) else {}
 

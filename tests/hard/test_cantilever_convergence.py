@@ -5,7 +5,7 @@ alone, the grid extended on every side), against its finite-element curve
 
 CI runs the two coarser neo-Hookean cell sizes (0.25 and 0.125 m; about 80 s together on this
 machine when it is lightly loaded); the finest (0.0625 m, several minutes) runs when
-PMPM_CANTILEVER_FINE=1 or by ``python -m pmpm.benchmarks.studies.cantilever_convergence``, which
+PMPM_CANTILEVER_FINE=1 or by ``python -m studies.cantilever_convergence``, which
 prints the table of docs/hard_cases.md.
 
 Where the limits come from:
@@ -41,7 +41,7 @@ import os
 
 import pytest
 
-from pmpm.benchmarks.studies.cantilever_convergence import CELL_SIZES, FEM_LARGEST_DROP, run_variant
+from studies.cantilever_convergence import CELL_SIZES, FEM_LARGEST_DROP, run_variant
 
 #: a gain or a loss of energy, relative to the largest energy in play (see above)
 ENERGY_TOLERANCE = 0.02

@@ -289,7 +289,7 @@ def test_frame_is_loaded_past_its_sway_collapse_load_and_stops_when_its_drift_pa
     and end_time; CI caps it at 0.1 s, see CI_END_TIME). The drift must come within the issue's
     3% refinement tolerance of 10% (this 0.05 m grid is the coarse end of that check), and if it
     passes 10% the run must end at the first step past it. Convergence under refinement is the
-    study pmpm/benchmarks/studies/frame_collapse.py (docs/hard_cases.md)."""
+    study studies/frame_collapse.py (docs/hard_cases.md)."""
     sys.path.insert(0, os.path.join(ROOT, "tests", "verification"))
     from frame_beam_model import HEIGHT, sway_collapse_load
     case = load("frame_collapse")

@@ -343,10 +343,10 @@ def run_cli(cwd, *args, timeout=TIMEOUT, ranks=0):
 
 def run_in_process(cwd, *args):
     """``pmpm args`` in this process, as :func:`run_cli` reports it (no interpreter start: the
-    cases that need no hang protection or second rank; pmpm/benchmarks/studies/bad_input.py
+    cases that need no hang protection or second rank; studies/bad_input.py
     puts back the process-wide state the command line changes)."""
     import types
-    from pmpm.benchmarks.studies.bad_input import cli_in_process
+    from studies.bad_input import cli_in_process
     code, out, err, exc = cli_in_process(args, cwd)
     if exc is not None:
         raise exc
@@ -662,7 +662,7 @@ def test_api_variant_argument_cannot_leave_the_folder(tmp_path, monkeypatch, var
     with pytest.raises(ConfigError, match="variant"):
         pmpm.run(dataclasses.replace(scene, variant=variant) if variant != "" else
                  dataclasses.replace(scene, variant="../../x"), write=True)
-    from pmpm.run import Run
+    from pmpm.runner import Run
     with pytest.raises(ConfigError, match="variant"):
         Run(dataclasses.replace(scene, variant="../../../../name"), write=True)
     assert _tree(tmp_path) == before, "a file was written"

@@ -4,8 +4,8 @@ code 2 and exactly one printable line ``pmpm: error: <where>: <reason>`` (or a v
 runs), no traceback, nothing written when refused, nothing outside the output folder, the user's
 own file beside pmpm's unchanged; a checkpoint whose particle arrays were reshaped, retyped or
 replaced by a link is never continued from. The generators and checks are
-pmpm/benchmarks/studies/bad_input.py, whose command runs a longer budget
-(``python -m pmpm.benchmarks.studies.bad_input --cases 2000``).
+studies/bad_input.py, whose command runs a longer budget
+(``python -m studies.bad_input --cases 2000``).
 
 The budget here is fixed and derandomized (the same cases on every run, so a failure reproduces
 and CI time is stable): 100 scenes, 20 results files, 30 checkpoints, 50 API calls, 200 cases;
@@ -16,7 +16,7 @@ cost 1.5 s of interpreter and imports, five minutes for the budget).
 import hypothesis  # noqa: F401 - setup.sh installs it; a missing one fails here, never skips
 import pytest
 
-from pmpm.benchmarks.studies.bad_input import run_generator
+from studies.bad_input import run_generator
 
 #: cases per generator in CI
 BUDGET = {"scene": 100, "file": 20, "restart": 30, "api": 50}

@@ -17,7 +17,7 @@ from mpi4py import MPI
 
 from pmpm.core.solver import ENERGY_CHECK_INTERVAL, Solver
 from pmpm.errors import UnstableRunError
-from pmpm.run import Run
+from pmpm.runner import Run
 from pmpm.scene.config import parse_scene
 
 BAD_AFTER = 25  # steps; not a multiple of the energy-check interval (10) nor a checkpoint step

@@ -20,7 +20,7 @@ BAR = open(os.path.join(ROOT, "cases", "bar.toml")).read()
 #: runs the command line and SIGKILLs itself right after its KILL_AFTER-th frame is written
 KILLER = """\
 import os, signal, sys
-from pmpm.run import Run
+from pmpm.runner import Run
 from pmpm.cli import main
 written = [0]
 original = Run.write_frame

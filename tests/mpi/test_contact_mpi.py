@@ -65,7 +65,7 @@ def _run(scene, c):
             energies.append([e["kinetic"], e["internal_work"], e["external_work"]])
     fields = {k: s.particles[k] for k in ("id", "x", "v", "stress")}
     gathered = c.gather(fields, root=0)
-    corrections = c.reduce(s.corrections, root=0)
+    corrections = c.reduce(s.grid_fields.corrections, root=0)
     result = None
     if c.Get_rank() == 0:
         cat = {k: np.concatenate([g[k] for g in gathered]) for k in fields}

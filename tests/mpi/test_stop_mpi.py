@@ -34,7 +34,7 @@ def hang_guard():
 
 
 def _run(data, on):
-    from pmpm.run import Run
+    from pmpm.runner import Run
     from pmpm.scene.config import parse_scene
     r = Run(parse_scene(data), on, write=False)
     summary = r.execute()

@@ -1,4 +1,4 @@
-"""The CFL-number part of ``pmpm bench accuracy`` (pmpm/benchmarks/accuracy_cfl.py).
+"""The CFL-number part of ``pmpm bench accuracy`` (studies/accuracy_cfl.py).
 
 * the bisection for the largest stable CFL number finds a known threshold;
 * the bar's time-step error is that of the explicit central-difference update: a mode of
@@ -16,8 +16,8 @@ import math
 import numpy as np
 import pytest
 
-from pmpm.benchmarks import accuracy as A
-from pmpm.benchmarks import accuracy_cfl as C
+from studies import accuracy as A
+from studies import accuracy_cfl as C
 
 
 def test_bisection_brackets_a_known_threshold():

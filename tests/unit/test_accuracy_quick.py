@@ -4,7 +4,7 @@
 The quick sweep: the axial bar (against its exact solution, v0 = 1e-3, one period) with MUSL and
 2 x 2 particles per cell at 10, 20, 40, 80 and 160 cells for the three B-spline bases, and the
 elastic portal frame (first peak of the joint panel's sway) at 0.1 and 0.05 m cells for the three
-bases against a cubic 0.025 m reference. See pmpm/benchmarks/accuracy.py and docs/accuracy.md.
+bases against a cubic 0.025 m reference. See studies/accuracy.py and docs/accuracy.md.
 
 Checks:
 

@@ -1,4 +1,4 @@
-"""The whole-response study (pmpm/benchmarks/accuracy_response.py, docs/accuracy.md "The whole
+"""The whole-response study (studies/accuracy_response.py, docs/accuracy.md "The whole
 response"): its estimators against closed forms, and ``pmpm bench accuracy --response --quick``
 run in-process (the elastic frame at 0.1 m cells, 3 x 3 particles, to 0.05 s, with FLIP, APIC and
 XPIC(2), against the continuum FE model at its coarse level; about 30 s on this machine)."""
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from pmpm.benchmarks.accuracy_response import analyse, crossing_period, cycle_peaks, Setting
+from studies.accuracy_response import analyse, crossing_period, cycle_peaks, Setting
 from pmpm.cli import main
 
 

@@ -157,7 +157,7 @@ def test_an_unnamed_transfer_costs_nothing():
     """docs/effects.md: FLIP (the default) keeps no affine field and lists no transfer effect;
     naming APIC adds the field and says so at start."""
     from pmpm.build import build_solver
-    from pmpm.run import Run
+    from pmpm.runner import Run
     flip = build_solver(_spinning_block("musl", "flip"), MPI.COMM_SELF)
     assert "C" not in flip.particles.fields and flip.transfer.fields == {}
     run = Run(_spinning_block("musl", "apic"), MPI.COMM_SELF, write=False)

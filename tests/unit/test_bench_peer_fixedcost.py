@@ -7,7 +7,8 @@ import json
 
 import pytest
 
-from pmpm.benchmarks import fixed_cost, peer
+from bench import peer
+from pmpm.benchmarks import fixed_cost
 from pmpm.cli import main
 
 

@@ -14,10 +14,10 @@ from mpi4py import MPI
 
 from pmpm.build import build_solver
 from pmpm.scene.config import apply_overrides, load_scene, parse_scene
-from pmpm.physics.contact import ContactSolver, contact_slots
+from pmpm.core.fields import GridFields
+from pmpm.physics.contact import BodyFields, contact_slots
 from pmpm.errors import ConfigError
-from pmpm.run import Run
-from pmpm.core.solver import Solver
+from pmpm.runner import Run
 
 SELF = MPI.COMM_SELF
 KE0 = 2 * 0.5 * (1000 * math.pi * 0.2 ** 2) * (0.1 ** 2 + 0.1 ** 2)  # the disks, 2.513 J/m
@@ -88,8 +88,8 @@ def test_bodies_not_named_share_one_field():
 # -- without contact nothing changes ----------------------------------------------------------
 
 def test_the_run_chooses_the_solver_by_the_scene_alone():
-    assert type(Run(_scene(TWO), SELF, write=False).solver) is Solver
-    assert type(Run(_scene(TWO, {"friction": 0.0}), SELF, write=False).solver) is ContactSolver
+    assert type(Run(_scene(TWO), SELF, write=False).solver.grid_fields) is GridFields
+    assert type(Run(_scene(TWO, {"friction": 0.0}), SELF, write=False).solver.grid_fields) is BodyFields
 
 
 def _same_as_default(scene_a, scene_b, steps, rtol=0.0):
@@ -124,7 +124,7 @@ def test_one_velocity_field_is_the_default_solver_to_the_bit(scheme):
     gravity, a support and the scheme's own order of the phases, to the last bit."""
     extra = _beam(scheme)
     s = _same_as_default(_scene([BEAM], **extra), _scene([BEAM], {"friction": 0.5}, **extra), 40)
-    assert s.n_slots == 1
+    assert s.grid_fields.n_slots == 1
 
 
 def test_one_velocity_field_with_a_force_set_is_the_default_solver():
@@ -138,7 +138,7 @@ def test_bodies_that_never_meet_move_as_without_contact():
     """Two bodies never within reach of the same node: their own fields are the single field."""
     apart = [_block("a", (0.1, 0.1), (0.3, 0.3), (0.05, 0.0)), _block("b", (0.7, 0.1), (0.9, 0.3))]
     s = _same_as_default(_scene(apart), _scene(apart, {"friction": 0.3}), 40)
-    assert s.n_slots == 2 and s.corrections == 0
+    assert s.grid_fields.n_slots == 2 and s.grid_fields.corrections == 0
 
 
 # -- bodies separate freely -------------------------------------------------------------------
@@ -155,7 +155,7 @@ def test_touching_bodies_separate_freely_where_one_field_glues_them():
         a = s.particles["body"] == 0
         va = s.particles["v"][a].mean(axis=0)
         if contact:
-            assert s.corrections == 0
+            assert s.grid_fields.corrections == 0
             np.testing.assert_allclose(s.particles["v"][a], [[-0.1, 0.0]] * a.sum(), rtol=0, atol=1e-12)
         else:
             assert va[0] > 0.0  # glued: pulled back and moving the other way
@@ -189,7 +189,7 @@ def test_disks_conserve_momentum_to_round_off(disks):
     h, p0 = disks["h"], disks["mass"] * 0.1 * math.sqrt(2)
     total = np.abs(h[:, 1:3] + h[:, 3:5]).max()
     assert total < 1e-12 * p0, total / p0
-    assert disks["solver"].corrections > 0
+    assert disks["solver"].grid_fields.corrections > 0
 
 
 def test_disks_total_energy_within_five_percent(disks):

@@ -1,4 +1,4 @@
-"""Rayleigh damping by ratio (pmpm.physics.damping): the coefficients, the viscous-stress kernel
+"""Rayleigh damping by ratio (pmpm.physics.rayleigh): the coefficients, the viscous-stress kernel
 against its NumPy twin, free vibrations that decay at the asked ratio, and the energy balance.
 
 The decay tests measure each structure's own first period in an undamped run first (the
@@ -19,10 +19,10 @@ import pytest
 from mpi4py import MPI
 
 import pmpm
-from pmpm.core.kernels.damping import viscous_stress
+from pmpm.physics.rayleigh import viscous_stress
 from pmpm.core.kernels.reference import viscous_stress_reference
 from pmpm.build import build_solver
-from pmpm.physics.damping import rayleigh_coefficients, ratio_at
+from pmpm.physics.rayleigh import rayleigh_coefficients, ratio_at
 from pmpm.scene.config import parse_scene
 
 PORTAL = str(pathlib.Path(__file__).resolve().parents[1] / "verification" / "portal_frame_handwritten.toml")

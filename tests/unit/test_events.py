@@ -3,7 +3,7 @@
 The scene is cases/hard/column_loss.toml shortened and coarsened (0.1 m cells, the floor load
 ramped over 10 ms, the middle column removed at 12 ms over 5 ms, 22 ms in all): the checks are
 of the bookkeeping, not of the structure's answer (that is the study's,
-pmpm/benchmarks/studies/column_loss.py).
+studies/column_loss.py).
 """
 import math
 
@@ -97,7 +97,7 @@ def test_heavy_floor_turns_the_beam_to_catenary_tension():
     the beam's cuts beside it carry tension (catenary action; in the case's 30 kN/m run the beam stays
     in compression), and that tension stays below the cable estimate w L^2 / (8 delta) of the double
     span, a cable carrying the whole load (the beam still carries part in bending)."""
-    from pmpm.benchmarks.studies import column_loss as cl
+    from studies import column_loss as cl
     import pmpm
     factor = 3.0
     ov = {**SHORT, **cl.catenary_overrides(factor), "solver.end_time": 0.062}

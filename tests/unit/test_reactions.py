@@ -87,7 +87,7 @@ def test_nothing_exists_when_nothing_is_asked(tmp_path):
     the grid update gets None (numba compiles the kernel without the branch), no HDF5 group."""
     import h5py
     from mpi4py import MPI
-    from pmpm.run import Run
+    from pmpm.runner import Run
     from pmpm.scene.config import parse_scene
     data = {"grid": {"cell_size": 0.5, "cells": [8, 4]},
             "materials": {"m": {"type": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}},
@@ -111,7 +111,7 @@ def test_restart_continues_the_tables_without_duplicates(tmp_path):
     import dataclasses
     import h5py
     from mpi4py import MPI
-    from pmpm.run import Run
+    from pmpm.runner import Run
     from pmpm.scene.config import parse_scene
     data = {"grid": {"cell_size": 0.25, "cells": [12, 6]},
             "materials": {"m": {"type": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}},

@@ -1,7 +1,7 @@
 """A restart must continue the same run: a checkpoint of another material model (a plastic
 model's back stress missing from an elastic run's checkpoint), or an output file whose frames
 have other fields (the plastic strain tensor asked for only on restart), is refused with one
-line naming the key that differs and exit code 2, before anything is written (pmpm/run.py;
+line naming the key that differs and exit code 2, before anything is written (pmpm/runner.py;
 the scene record in each checkpoint, pmpm/scene/fingerprint.py)."""
 import contextlib
 import io

@@ -6,7 +6,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pmpm.io.post import postprocess
-from pmpm.run import Run
+from pmpm.runner import Run
 from pmpm.scene.config import parse_scene
 
 

@@ -51,7 +51,7 @@ __all__ = ["Frame3Data", "read_scene3", "Frame3FE", "responses", "study", "SCENE
 SCENE3 = Path(__file__).resolve().parents[2] / "cases" / "frame_3storey.toml"
 JOINTS = ("c0_f1", "c0_f2", "c0_f3")
 #: horizontal forces (N) at JOINTS orthogonal to frame2d_model's modes 1 and 3 there (continuous
-#: joints; pmpm.benchmarks.studies.frame_3storey.mode_pattern(frame_model(), 1))
+#: joints; studies.frame_3storey.mode_pattern(frame_model(), 1))
 MODE2_PATTERN = (-600000.0, -550564.21, 529176.39)
 
 

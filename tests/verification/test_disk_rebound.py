@@ -43,9 +43,9 @@ def mpm_rebound(h, end=2.2):
     v0 = math.hypot(*data["bodies"][0]["velocity"])
     last = []
     while s.t < end - 1e-12:
-        before = s.corrections
+        before = s.grid_fields.corrections
         s.step()
-        if s.corrections != before:
+        if s.grid_fields.corrections != before:
             last = []  # still in contact
         p = s.particles
         a = p["body"] == 0

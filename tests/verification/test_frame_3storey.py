@@ -27,7 +27,7 @@ Checked, the bounds being the issue's (3% for periods, 5% for the peak drift):
     drift: the peak bound applied to every sample, so a drift between peaks counts);
 (d) energy: the undamped elastic scene conserves it, so |external work - kinetic - strain| stays
     below 1% of the external work over the whole run, losses and gains both counted.
-T2 is the study's (``python -m pmpm.benchmarks.studies.frame_3storey``, a run loaded in a
+T2 is the study's (``python -m studies.frame_3storey``, a run loaded in a
 mode-2 pattern): 0.6% from the continuum's at 0.1 m (3 x 3 particles), 0.1% at 0.05 m.
 """
 import os
@@ -37,7 +37,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.benchmarks.studies import frame_3storey as study
+from studies import frame_3storey as study
 
 sys.path.insert(0, os.path.dirname(__file__))
 import frame3_fe_model as f3  # noqa: E402

@@ -3,8 +3,8 @@
 ``cases/frame_3storey.toml``'s ``ground_motion`` variant shakes the SAC three-storey frame with
 ``cases/records/synthetic_quake.AT2``. Its supports are not written as ``[[boundary]]`` tables:
 the front end (pmpm.scene.frame) generates them, one ``fixed`` box per support on the grid node
-line y = 0, with no ``body``. pmpm.physics.effect("ground_motion")motion drives every ``fixed`` box support when
-``[loads.effect("ground_motion")_motion]`` names no boundaries, so the generated ones are driven: checked here on
+line y = 0, with no ``body``. pmpm.physics.groundmotion drives every ``fixed`` box support when
+``[loads.ground_motion]`` names no boundaries, so the generated ones are driven: checked here on
 the case itself at 0.2 m cells (3 x 3 particles per cell, about 12,000 particles), 0.2 s of the
 record (about 5,900 steps, some 30 s on this host), against the record integrated here:
 
@@ -77,7 +77,7 @@ def u_exact(t):
 def coarse_scene():
     """The case's ground_motion variant on cells of H over the case's own domain."""
     data = read_toml(CASE)
-    data = apply_overrides(data, data["variants"]["ground_motion"], "variants.effect("ground_motion")_motion")
+    data = apply_overrides(data, data["variants"]["ground_motion"], "variants.ground_motion")
     grid = data["grid"]
     cells = [int(round(grid["cell_size"] * n / H)) for n in grid["cells"]]
     data["grid"] = dict(grid, cell_size=H, cells=cells)

@@ -198,7 +198,7 @@ def reaction_reference(G, dt, bc_mask, bc_vel, ids, n, x0, y0, h):
 
 
 def viscous_stress_reference(sv, de, vol, dt, a1, E, nu, plane_strain):
-    """NumPy twin of ``pmpm.core.kernels.damping.viscous_stress`` (one material): returns
+    """NumPy twin of ``pmpm.physics.rayleigh.viscous_stress`` (one material): returns
     (new sv, work) with work = sum V sv : de and new sv = (a1 / dt) C de, C the elastic
     tangent matrix (plane stress, or the in-plane rows of plane strain)."""
     if plane_strain:

@@ -12,6 +12,7 @@ import numba as nb
 import numpy as np
 
 from pmpm.core.shape import basis_of, corner_count, corner_point, corner_share, particle_weights, stencil
+from pmpm.core.kernels.reference import basis_matrix
 
 __all__ = ["mark_support", "support_rows", "support_rows_reference", "row_width", "support_gather",
            "support_solve", "support_solve_reference"]
@@ -56,7 +57,6 @@ def support_rows(idx, x, origin, inv_h, ncx, ncy, shape, nodes, weights):
 def support_rows_reference(order, x, origin, h, cells, domain=None, F=None):
     """The twin of ``support_rows`` from the reference basis (pmpm.core.kernels.reference):
     the dense weights (P, nodes) of particles ``x`` on the whole grid, node i (ncy + 1) + j."""
-    from pmpm.core.kernels.reference import basis_matrix
     N, _ = basis_matrix(order, x, origin, h, cells, domain, F)
     return N.reshape(len(x), -1)
 

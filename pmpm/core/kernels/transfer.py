@@ -132,6 +132,37 @@ def _buffers(shape):
 
 
 @nb.njit(cache=True, inline="always")
+def gather2(G, f, q, K, I0, J0, WX, WY, ox, oy):
+    """(sum_i N_i G_i[f], sum_i N_i G_i[f + 1]) over particle q's stencil (its block weights):
+    the one gather loop of the point kernels (FLIP's and XPIC's)."""
+    ux = 0.0
+    uy = 0.0
+    for a in range(K):
+        ii = I0[q] + a - ox
+        wa = WX[a, q]
+        for b in range(K):
+            jj = J0[q] + b - oy
+            w = wa * WY[b, q]
+            ux += w * G[ii, jj, f]
+            uy += w * G[ii, jj, f + 1]
+    return ux, uy
+
+
+@nb.njit(cache=True, inline="always")
+def scatter2(G, f, q, K, I0, J0, WX, WY, ox, oy, ax, ay):
+    """G_i[f] += N_i ax, G_i[f + 1] += N_i ay over particle q's stencil: the one scatter loop of
+    a particle's vector (the MUSL re-map, XPIC's smoothing pass)."""
+    for a in range(K):
+        ii = I0[q] + a - ox
+        wa = WX[a, q]
+        for b in range(K):
+            jj = J0[q] + b - oy
+            w = wa * WY[b, q]
+            G[ii, jj, f] += w * ax
+            G[ii, jj, f + 1] += w * ay
+
+
+@nb.njit(cache=True, inline="always")
 def _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY):
     """Weights of particles p0 .. p0 + nq - 1 into I0, WX (x axis) and J0, WY (y axis);
     S[0] takes the coordinates, S[1] the domain half-lengths (GIMP only)."""
@@ -237,16 +268,7 @@ def _g2p_velocity_point(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape,
             elif not speed2 < 1e300:  # NaN or inf
                 bad += 1
             if remap:
-                mvx = m[p] * nvx
-                mvy = m[p] * nvy
-                for a in range(K):
-                    ii = I0[q] + a - ox
-                    wa = WX[a, q]
-                    for b in range(K):
-                        jj = J0[q] + b - oy
-                        w = wa * WY[b, q]
-                        G[ii, jj, 5] += w * mvx
-                        G[ii, jj, 6] += w * mvy
+                scatter2(G, 5, q, K, I0, J0, WX, WY, ox, oy, m[p] * nvx, m[p] * nvy)
     return vmax2 ** 0.5, bad
 
 

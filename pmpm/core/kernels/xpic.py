@@ -15,7 +15,7 @@ the division by the mass, the boundary values) is pmpm.core.transfers.XPIC's.
 """
 import numba as nb
 
-from pmpm.core.kernels.transfer import _block_weights, _buffers
+from pmpm.core.kernels.transfer import _block_weights, _buffers, gather2, scatter2
 from pmpm.core.shape import BLOCK, stencil
 
 __all__ = ["grid_particle_grid"]
@@ -34,23 +34,5 @@ def grid_particle_grid(x, m, U, out, ox, oy, origin, inv_h, ncx, ncy, shape):
         _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
         for q in range(nq):
             p = p0 + q
-            ux = 0.0
-            uy = 0.0
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    w = wa * WY[b, q]
-                    ux += w * U[ii, jj, 0]
-                    uy += w * U[ii, jj, 1]
-            mx = m[p] * ux
-            my = m[p] * uy
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    w = wa * WY[b, q]
-                    out[ii, jj, 0] += w * mx
-                    out[ii, jj, 1] += w * my
+            ux, uy = gather2(U, 0, q, K, I0, J0, WX, WY, ox, oy)
+            scatter2(out, 0, q, K, I0, J0, WX, WY, ox, oy, m[p] * ux, m[p] * uy)

@@ -7,6 +7,7 @@ from pmpm.physics.materials.base import Material
 from pmpm.physics.materials import linear_elastic  # noqa: F401  (registers)
 from pmpm.physics.materials import smooth_vonmises, bilinear_vonmises  # noqa: F401
 from pmpm.physics.materials import neo_hookean  # noqa: F401
+from pmpm.errors import ConfigError
 
 __all__ = ["Material", "make_material", "material_names"]
 
@@ -18,7 +19,6 @@ def material_names():
 
 def make_material(table, key, formulation):
     """Build the material described by TOML ``table`` at dotted ``key``."""
-    from pmpm.errors import ConfigError
     table = dict(table)
     kind = table.pop("type", None)
     if kind is None:

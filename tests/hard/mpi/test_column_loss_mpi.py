@@ -64,7 +64,7 @@ def test_column_loss_same_answer_on_one_and_several_ranks():
                 problems += [f"{k}: relative difference {e:.3g}" for k, e in
                              ((k, _relative(a, b)) for k, (a, b) in pairs.items()) if not e <= RTOL]
                 if not abs(removed - ref.solver.effects.energy("removed_energy")) <= RTOL * abs(ref.solver.effects.energy("removed_energy")):
-                    problems.append(f"removed energy {removed} vs {ref.solver.effects.energy("removed_energy")}")
+                    problems.append(f"removed energy {removed} vs {ref.solver.effects.energy('removed_energy')}")
                 if len(fields["id"]) >= par.solver.n_total:
                     problems.append("no particle was removed")
         except Exception as exc:  # reported on every rank below

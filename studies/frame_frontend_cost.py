@@ -7,7 +7,7 @@ solvers in one process, warmed up, then rounds of 200 steps each in turn (the or
 alternating), CPU time per step,
 the median of the rounds. Prints the figures and a final JSON line.
 
-Run: ``python -m pmpm.benchmarks.studies.frame_frontend_cost [--rounds 7]``
+Run: ``python -m studies.frame_frontend_cost [--rounds 7]``
 """
 import argparse
 import json
@@ -17,7 +17,7 @@ import time
 
 __all__ = ["main"]
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 SCENES = {"frame": os.path.join(ROOT, "cases", "portal_frame.toml"),
           "handwritten": os.path.join(ROOT, "tests", "verification", "portal_frame_handwritten.toml")}
 

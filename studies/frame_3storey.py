@@ -36,9 +36,9 @@ carry the section's area and inertia (the front end refuses it).
 
 Run::
 
-    python -m pmpm.benchmarks.studies.frame_3storey --cells 0.2 --t-end 1.5 --plot /tmp/f3.png
+    python -m studies.frame_3storey --cells 0.2 --t-end 1.5 --plot /tmp/f3.png
     # the finer grids on two ranks (0.1 m: 48,000 particles at 3 x 3; 0.05 m: 190,000, hours here)
-    mpirun -n 2 python -m pmpm.benchmarks.studies.frame_3storey --cells 0.1 --out /tmp/f3_01.json
+    mpirun -n 2 python -m studies.frame_3storey --cells 0.1 --out /tmp/f3_01.json
 """
 import argparse
 import dataclasses
@@ -49,12 +49,12 @@ import time
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["frame_model", "continuum_reference", "mode_pattern", "with_joint_forces", "scene_at", "run_cell", "fit_periods", "compare",
            "compare_mode", "main"]
 
-_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 CASE = os.path.join(_ROOT, "cases", "frame_3storey.toml")
 #: the tracked left joints of floors 2, 3 and the roof (frame node names)
 JOINTS = ("c0_f1", "c0_f2", "c0_f3")
@@ -285,7 +285,7 @@ def plot(runs, model, path):
 
 def main(argv=None):
     from mpi4py import MPI
-    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.frame_3storey",
+    ap = argparse.ArgumentParser(prog="python -m studies.frame_3storey",
                                  description="The three-storey frame against the independent frame model.")
     ap.add_argument("--cells", type=float, nargs="+", default=[0.2], help="cell sizes (m)")
     ap.add_argument("--ppc", type=int, default=3, help="particles per cell along each axis (all cell sizes)")

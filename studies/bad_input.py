@@ -23,7 +23,7 @@ user beside it; :func:`promise_broken` says what a case broke, if anything. The 
 (tests/integration/test_bad_input_generated.py) runs a fixed, derandomized budget; this module's
 command runs a longer one and prints the count of cases and of broken promises per generator::
 
-    python -m pmpm.benchmarks.studies.bad_input --cases 2000
+    python -m studies.bad_input --cases 2000
 """
 import argparse
 import contextlib
@@ -584,7 +584,7 @@ def run_generator(kind, cases, derandomize, collect, seed=0):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.bad_input",
+    p = argparse.ArgumentParser(prog="python -m studies.bad_input",
                                 description="Generated bad input against pmpm's promise.")
     p.add_argument("--cases", type=int, default=2000, help="cases in all, shared by the generators")
     p.add_argument("--kinds", nargs="+", default=["scene", "file", "restart", "api"],

@@ -19,8 +19,8 @@ and wall time. Per material it reports the successive differences of the largest
 
 Run::
 
-    python -m pmpm.benchmarks.studies.cantilever_convergence                  # the neo-Hookean variants
-    python -m pmpm.benchmarks.studies.cantilever_convergence --variants neo_hookean_h0.25 \
+    python -m studies.cantilever_convergence                  # the neo-Hookean variants
+    python -m studies.cantilever_convergence --variants neo_hookean_h0.25 \
         --histories /tmp/cantilever.npz --plot docs/cantilever_convergence.png
 
 It prints one Markdown table row per run as it finishes, then the differences, then one JSON
@@ -34,10 +34,10 @@ import time
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
-CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.abspath(__file__))))), "cases", "hard", "cantilever_large_rotation.toml")
+CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cases", "hard",
+                    "cantilever_large_rotation.toml")
 MATERIALS = ("neo_hookean", "linear_elastic")
 CELL_SIZES = ("0.25", "0.125", "0.0625")
 FE_CURVE = os.path.join(os.path.dirname(CASE), "data", "cantilever_fe_corner.csv")

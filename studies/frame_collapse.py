@@ -22,7 +22,7 @@ on stdout (also written to ``--out``).
 
 Run (one rank)::
 
-    python -m pmpm.benchmarks.studies.frame_collapse --cells 0.05 0.025     # to 0.1 s
+    python -m studies.frame_collapse --cells 0.05 0.025     # to 0.1 s
 """
 import argparse
 import dataclasses
@@ -34,7 +34,7 @@ import time
 
 __all__ = ["collapse_scene", "run_collapse", "study", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "hard", "frame_collapse.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "hard", "frame_collapse.toml")
 TRACK = "upper_left_joint"
 #: the issue's measure of collapse: drift past 10% of the column height (centre line, 3.658 m)
 DRIFT_RATIO = 0.10
@@ -122,7 +122,7 @@ def study(cells, t_end=None, t_compare=None, progress=None):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.frame_collapse",
+    ap = argparse.ArgumentParser(prog="python -m studies.frame_collapse",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=float, nargs="+", default=[0.05, 0.025], help="cell sizes (m)")
     ap.add_argument("--t-end", type=float, default=T_COMPARE,

@@ -58,7 +58,7 @@ def cfl_plan(quick):
 
 
 def _run(problem, shape, cell, cfl):
-    from pmpm.benchmarks import accuracy as A
+    from studies import accuracy as A
     from pmpm.errors import ParticleExitError, UnstableRunError
     try:
         if problem == "bar":

@@ -8,7 +8,7 @@ the slab boundary, not on n), alpha and beta the network latency and bandwidth, 
 latency of one stage of the allreduce of the time step (one per step, plus a few more for the
 energy check every 10 steps). Weak scaling keeps n fixed, so its efficiency is T(1) / T(P).
 
-    python -m pmpm.benchmarks.studies.scaling_model results.jsonl [--latency 2e-6] [--bandwidth 1e10]
+    python -m studies.scaling_model results.jsonl [--latency 2e-6] [--bandwidth 1e10]
 
 reads JSON lines of ``pmpm bench scaling --mode weak`` and prints the fit and a projection to
 1024 ranks as Markdown.

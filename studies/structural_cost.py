@@ -8,8 +8,8 @@ bookkeeping (the case's two base reactions) and without it.
 
 Run::
 
-    python -m pmpm.benchmarks.studies.structural_cost --steps 1000 --repeat 5
-    python -m pmpm.benchmarks.studies.structural_cost --kernel
+    python -m studies.structural_cost --steps 1000 --repeat 5
+    python -m studies.structural_cost --kernel
 """
 import argparse
 import dataclasses
@@ -19,7 +19,7 @@ import time
 
 __all__ = ["main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 
 
 def _scenes():
@@ -102,7 +102,7 @@ def main(argv=None):
           f"with {lo['with']:.3f} ms (ratio {lo['with'] / lo['without']:.4f}); ranges: without "
           f"{min(times['without']) * 1e3:.3f}-{max(times['without']) * 1e3:.3f} ms, with "
           f"{min(times['with']) * 1e3:.3f}-{max(times['with']) * 1e3:.3f} ms")
-    print(f"one sample ({len(s.effect("sections"))} cuts + {len(s.effect("reactions").names)} reactions, one allreduce): "
+    print(f"one sample ({len(s.effect('sections'))} cuts + {len(s.effect('reactions').names)} reactions, one allreduce): "
           f"{sample * 1e6:.1f} us CPU")
     return 0
 

@@ -18,10 +18,10 @@ ENERGY_INTERVAL for the plastic work at each sway maximum and the energy balance
 
 Run (one rank; a shared 2-vCPU machine leaves the other core to other work)::
 
-    python -m pmpm.benchmarks.studies.frame_resolution --cells 0.1 0.05 0.025 --t-end 0.25 \
+    python -m studies.frame_resolution --cells 0.1 0.05 0.025 --t-end 0.25 \
         --out docs/portal_frame_resolution.json --histories /tmp/frame_study/histories.npz
-    python -m pmpm.benchmarks.studies.frame_resolution --analyse /tmp/frame_study/histories.npz
-    python -m pmpm.benchmarks.studies.frame_resolution --estimates
+    python -m studies.frame_resolution --analyse /tmp/frame_study/histories.npz
+    python -m studies.frame_resolution --estimates
 
 ``--t-end`` takes one value for all cell sizes or one per cell size (a fine grid can run a shorter
 end time that still covers the first peak and two periods, about 0.1 s). The script prints one
@@ -44,13 +44,13 @@ import time
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["frame_scene", "run_frame", "peak_and_period", "oscillation_centre", "study", "main",
            "continuum_estimates", "extended_frame", "frame_estimate", "shear_area", "strip_profile",
            "analyse_histories", "sway_extrema"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 DOMAIN_LO = (-0.5, 0.0)
 DOMAIN_HI = (6.6, 4.2)
 VARIANTS = ("elastic", "elastoplastic")
@@ -492,7 +492,7 @@ def study(cells, t_ends, out=None, histories=None, reference=True, log=sys.stder
 
     result = {"case": "cases/portal_frame.toml", "track": TRACK, "ranks": 1,
               "host": {"cpus": os.cpu_count(), "note": "2 vCPUs shared with other work: wall times are noisy"},
-              "command": "python -m pmpm.benchmarks.studies.frame_resolution " + " ".join(sys.argv[1:]),
+              "command": "python -m studies.frame_resolution " + " ".join(sys.argv[1:]),
               "mpi": MPI.Get_library_version().replace("\x00", "").splitlines()[0].strip(), "runs": []}
     if reference:
         ref = beam_reference(max(t_ends))
@@ -616,7 +616,7 @@ def _write(path, result):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.frame_resolution", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.frame_resolution", description=__doc__.splitlines()[0])
     ap.add_argument("--cells", type=float, nargs="+", default=[0.1, 0.05, 0.025], help="cell sizes in m")
     ap.add_argument("--t-end", type=float, nargs="+", default=[0.25],
                     help="end time in s: one for all cell sizes, or one per cell size")

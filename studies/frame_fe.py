@@ -11,7 +11,7 @@ convergence of the peak in the number of modes at the finest level; last, one JS
 
 Run::
 
-    python -m pmpm.benchmarks.studies.frame_fe --h0 0.2 --levels 0 1 2 3 --modes 40
+    python -m studies.frame_fe --h0 0.2 --levels 0 1 2 3 --modes 40
 
 Level 3 at h0 = 0.2 (0.025 m elements, about 150k unknowns) takes a few minutes on this machine;
 levels 0-2 take seconds. Nothing is written.
@@ -23,7 +23,7 @@ import sys
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["fe_module", "study", "markdown_table", "fit_history", "main"]
 
@@ -117,7 +117,7 @@ def _analyse(fe, t, u, omega):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.studies.frame_fe",
+    ap = argparse.ArgumentParser(prog="python -m studies.frame_fe",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--h0", type=float, default=0.2, help="largest element edge at level 0 (m)")
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2], help="refinement levels (nested)")

@@ -12,7 +12,7 @@ P_c.
 Run::
 
     pmpm cases/portal_pushover.toml
-    python -m pmpm.benchmarks.studies.pushover --results portal_pushover_results/portal_pushover.h5 \\
+    python -m studies.pushover --results portal_pushover_results/portal_pushover.h5 \\
         --plot docs/structural_results_capacity.png
 """
 import argparse
@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["collapse_load", "fe_stiffness", "main"]
 

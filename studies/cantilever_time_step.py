@@ -14,8 +14,8 @@ clamped face's line (x = the body's smallest initial x).
 
 Run::
 
-    python -m pmpm.benchmarks.studies.cantilever_time_step --variant neo_hookean_h0.0625
-    python -m pmpm.benchmarks.studies.cantilever_time_step --variant neo_hookean_h0.0625 \
+    python -m studies.cantilever_time_step --variant neo_hookean_h0.0625
+    python -m studies.cantilever_time_step --variant neo_hookean_h0.0625 \
         --set solver.cfl=0.125
 
 The last line is one JSON object.
@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CASE = os.path.join(ROOT, "cases", "hard", "cantilever_large_rotation.toml")
 FE_CURVE = os.path.join(ROOT, "cases", "hard", "data", "cantilever_fe_corner.csv")
 NOISE_TIMES = (1.0, 1.3, 1.6, 1.9, 2.2, 2.5)

@@ -12,7 +12,7 @@ import sys
 __all__ = ["TESTS", "available", "load"]
 
 #: tests/verification of the checkout this package sits in
-TESTS = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "verification"))
+TESTS = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "tests", "verification"))
 
 
 def available(name):

@@ -21,7 +21,7 @@ Two problems, each run in-process on one rank (``build_solver(scene, MPI.COMM_SE
 
 The sweep varies the shape function (linear, quadratic, cubic B-spline), particles per cell per
 axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL) at CFL 0.5; then the CFL
-number alone (0.3 ... 0.9 and the largest stable, by bisection: pmpm/benchmarks/accuracy_cfl.py).
+number alone (0.3 ... 0.9 and the largest stable, by bisection: studies/accuracy_cfl.py).
 The bar is a full factorial (it is cheap). The frame is not (the finest runs take many minutes
 each): every shape at every cell size with 2 x 2 particles and MUSL; the full factorial over
 particles per cell and scheme at 0.05 m; particles per cell and scheme varied one at a time at
@@ -81,7 +81,7 @@ BAR_CELLS = (10, 20, 40, 80, 160)
 BAR_CELLS_QUICK = BAR_CELLS
 
 # -- the frame (cases/portal_frame.toml, variant "elastic") -----------------------------------
-FRAME_CASE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "cases", "portal_frame.toml")
+FRAME_CASE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "cases", "portal_frame.toml")
 FRAME_DOMAIN = ((-0.5, 0.0), (6.6, 4.2))
 FRAME_T_END = 0.026        # s; the first peak comes at 0.019-0.023 s
 FRAME_SAMPLE = 5e-5        # s between samples of the joint displacement
@@ -503,7 +503,7 @@ def write_markdown(rows, summary, path):
                   "count) at it; 0.5 (the main sweep's) where the shape and cell size were not swept.", "",
                   "| target | shape | ppc | scheme | cell (m) | CFL | error | wall (s) | CPU (s) |",
                   "|---|---|---|---|---|---|---|---|---|"]
-        from pmpm.benchmarks.accuracy_cfl import cfl_recommendation
+        from studies.accuracy_cfl import cfl_recommendation
         cfl = summary.get("cfl")
         groups = [("any", summary["recommendations"])] + list(summary.get("recommendations_by_shape", {}).items())
         for label, recs in groups:
@@ -518,7 +518,7 @@ def write_markdown(rows, summary, path):
                 lines.append(f"| {head} | {r['shape']} | {r['ppc']} | {r['scheme']} | {r['cell_size']:g} "
                              f"| {c} | {r['error']:.3%} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} |")
     if summary.get("cfl"):
-        from pmpm.benchmarks.accuracy_cfl import cfl_markdown
+        from studies.accuracy_cfl import cfl_markdown
         lines += [""] + cfl_markdown(summary["cfl"]["rows"], summary["cfl"]["largest_stable"])
     if summary.get("reference"):
         ref = summary["reference"]
@@ -595,7 +595,7 @@ def add_arguments(p):
     p.add_argument("--outdir", default="accuracy_results", help="directory for accuracy.csv/.md/.png")
     p.add_argument("--from-csv", metavar="CSV", default=None,
                    help="run nothing: redo the analysis and the files from an earlier accuracy.csv")
-    p.add_argument("--no-cfl", action="store_true", help="skip the CFL-number sweep (pmpm/benchmarks/accuracy_cfl.py)")
+    p.add_argument("--no-cfl", action="store_true", help="skip the CFL-number sweep (studies/accuracy_cfl.py)")
     p.add_argument("--cfl-only", action="store_true",
                    help="run only the frame's reference and the CFL-number sweep")
     p.add_argument("--clock", choices=["wall", "cpu"], default="wall",
@@ -603,7 +603,7 @@ def add_arguments(p):
     p.add_argument("--response", action="store_true",
                    help="instead: the whole 0.25 s response of the elastic frame per setting (cell, shape, scheme, "
                         "CFL, transfer): numerical damping, every peak and the period against the continuum FE "
-                        "model, cost (pmpm/benchmarks/accuracy_response.py; with --quick, --outdir)")
+                        "model, cost (studies/accuracy_response.py; with --quick, --outdir)")
 
 
 def read_csv(path):
@@ -634,7 +634,7 @@ def study(quick=False, outdir="accuracy_results", log=None, out=None, command=No
     # the streams of the call, not of the import (a caller may redirect them, as the tests do)
     log = sys.stderr if log is None else log
     out = sys.stdout if out is None else out
-    from pmpm.benchmarks import accuracy_cfl
+    from studies import accuracy_cfl
     t_study = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
     csv_path = os.path.join(outdir, "accuracy.csv")
@@ -682,7 +682,7 @@ def _sweep(runs, csv_path, log):
 
 
 def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s", cfl_rows=None, best=None):
-    from pmpm.benchmarks import accuracy_cfl
+    from studies import accuracy_cfl
     ref = attach_frame_errors(rows)
     pareto_front(rows, clock)
     orders = convergence_orders(rows, "bar")
@@ -776,7 +776,7 @@ def accuracy(args):
         print("pmpm bench accuracy runs on one rank (start it without mpirun -n > 1)", file=sys.stderr)
         return 2
     if args.response:
-        from pmpm.benchmarks.accuracy_response import main as response
+        from studies.accuracy_response import main as response
         return response((["--quick"] if args.quick else []) + ["--outdir", args.outdir])
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:

@@ -5,8 +5,8 @@ particle fields, time histories of the tracked points, energies), an XDMF sideca
 CSV histories and plots. A run that goes unstable, or whose particles leave the grid, stops on
 every rank with a message, writes a checkpoint of its last good state and exits non-zero.
 
-Calling this module, ``pmpm.run(scene, overrides=..., write=False)``, is the Python API:
-:func:`pmpm.api.run` (docs/api.md).
+The Python API, ``pmpm.run(scene, overrides=..., write=False)`` (:func:`pmpm.api.run`,
+docs/api.md), runs scenes through this class.
 """
 import gc
 import json
@@ -15,17 +15,24 @@ import math
 import os
 import sys
 import time
-import types
 
 import numpy as np
 
+from decomposition import alltoallv_fields
+from decomposition.slab import block_range
 from pmpm import __version__
-from pmpm.errors import ParticleExitError, UnstableRunError
 from pmpm.build import build_solver
 from pmpm.core.effects import energy_terms
+from pmpm.errors import ConfigError, OutputWriteError, ParticleExitError, UnstableRunError
+from pmpm.io import OutputFile, read_checkpoint, write_checkpoint
+from pmpm.io.checkpoint import _next_slot, _write_reason, checkpoint_paths, lastgood_path
+from pmpm.io.ownership import ForeignFileError, check_owned, remove_owned
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
-from pmpm.stop import make_stop_check
 from pmpm.results.recorder import UNITS, StructuralRecorder
+from pmpm.scene.config import check_written_scene
+from pmpm.scene.fingerprint import first_difference, fingerprint, scene_record
+from pmpm.scene.names import output_base, run_files
+from pmpm.stop import make_stop_check
 
 __all__ = ["Run", "output_path", "energy_summary"]
 logger = logging.getLogger(__name__)
@@ -45,9 +52,11 @@ ACCUMULATED = ("external_work", "internal_work", *[t.name for t in energy_terms(
 def energy_summary(e):
     """The run summary's energy line: the external work and the numerical loss (J), the loss
     also as a fraction of the energy put in (initial energy plus external work)."""
-    # initial energy + external work: by the definition of the loss, the terms and the loss
-    supplied = (e["kinetic"] + e["strain"] + e["plastic_work"] + e.get("fracture_work", 0.0) + e["damping_work"]
-                + e["numerical_loss"])
+    # initial energy + external work: by the definition of the loss (pmpm.core.solver), every
+    # term it subtracts (each registered energy term: plastic work, damping works, removed
+    # energy, ...) plus the loss
+    held = [e[t.name] for t in energy_terms()]
+    supplied = e["kinetic"] + e["strain"] + sum(held) + e["numerical_loss"]
     share = f" ({100 * e['numerical_loss'] / supplied:.3g}% of the energy put in)" if supplied > 0 else ""
     return (f"external work {e['external_work']:.6g} J, kinetic {e['kinetic']:.6g} J, strain "
             f"{e['strain']:.6g} J, plastic {e['plastic_work']:.6g} J, damping {e['damping_work']:.6g} J, "
@@ -56,7 +65,6 @@ def energy_summary(e):
 
 def output_path(scene):
     """``<output.directory>/<stem>[_<variant>].h5`` (names checked by pmpm.scene.names)."""
-    from pmpm.scene.names import output_base
     return output_base(scene) + ".h5"
 
 
@@ -159,7 +167,6 @@ class Run:
         self.scene = scene
         if write:
             # whoever built the scene (CLI, API, a script): no output name leaves the folder
-            from pmpm.scene.config import check_written_scene
             check_written_scene(scene)
         self.solver = build_solver(scene, comm)
         self.comm = self.solver.comm
@@ -167,7 +174,6 @@ class Run:
         self.write = write
         self.path = output_path(scene)
         self.restarted_from = None
-        from pmpm.scene.fingerprint import fingerprint, scene_record
         self.record = scene_record(scene)
         self.fingerprint = fingerprint(self.record)
         if restart:
@@ -201,8 +207,6 @@ class Run:
     def _guard(self, path, fn, *args):
         """Run a write on every rank; if it fails anywhere (full disk, I/O error), close the
         output and raise OutputWriteError naming ``path`` on every rank together."""
-        from pmpm.errors import OutputWriteError
-        from pmpm.io.checkpoint import _write_reason
         error, result = None, None
         with _quiet_h5py_deallocs():
             try:
@@ -229,7 +233,6 @@ class Run:
         system of ``path`` cannot hold, before HDF5 starts it: HDF5 does not recover from a
         write cut short by a full disk (its files cannot even be closed cleanly), while a
         refused write leaves every file as it was. ``replaces``: a file the write truncates."""
-        from pmpm.errors import OutputWriteError
         short = None
         if self.rank == 0:
             import shutil
@@ -269,7 +272,6 @@ class Run:
     def _check_own_files(self):
         """Refuse to write over the output or checkpoints of another run: a file at this run's
         names written by another scene file or variant (same stem in the same directory)."""
-        from pmpm.errors import ConfigError
         bad = None
         if self.rank == 0:
             me = (_scene_location(self.scene.path, self.path), self.scene.variant)
@@ -283,8 +285,6 @@ class Run:
         foreign = None
         if self.rank == 0 and bad is None:
             # every file the run and its post-processing may write over: pmpm's own or refused
-            from pmpm.io.ownership import ForeignFileError, check_owned
-            from pmpm.scene.names import run_files
             try:
                 for _key, name in run_files(self.scene):
                     check_owned(os.path.join(self.scene.output.directory, name), self.scene.stem)
@@ -295,13 +295,11 @@ class Run:
             raise ConfigError("output.directory", f"{bad} belongs to a run of another scene file "
                                                   f"or variant; choose another output.directory")
         if foreign:
-            from pmpm.io.ownership import ForeignFileError
             raise ForeignFileError(*foreign)
 
     def _make_directory(self):
         """Create output.directory (rank 0); a folder that cannot be made is bad input, said
         on every rank together."""
-        from pmpm.errors import ConfigError
         problem = None
         if self.rank == 0:
             try:
@@ -317,8 +315,6 @@ class Run:
         """A fresh run replaces this run's results file, so the checkpoints and last good state
         of an earlier run of the same scene no longer belong to it (a later --restart would
         continue the old run)."""
-        from pmpm.io.checkpoint import checkpoint_paths, lastgood_path
-        from pmpm.io.ownership import ForeignFileError, remove_owned
         foreign = None
         if self.rank == 0:
             try:  # only pmpm's own files of this scene (checked again: never a user's file)
@@ -331,7 +327,6 @@ class Run:
             raise ForeignFileError(*foreign)
 
     def _open_output(self):
-        from pmpm.io import OutputFile
         if self.rank == 0:
             os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
         self.comm.Barrier()
@@ -354,9 +349,6 @@ class Run:
         """Continue from ``path``: a results file (its newest checkpoint) or a checkpoint file
         itself (``<stem>.lastgood.h5``, ``<stem>.ckpt0.h5``). Refuses a checkpoint of another
         scene (naming the first key that differs) and an inconsistent one."""
-        from pmpm.errors import ConfigError
-        from pmpm.io import read_checkpoint
-        from pmpm.scene.fingerprint import first_difference
         s = self.solver
         wanted = s.particles.spec()  # what this scene's run carries (name -> shape, dtype)
         explicit = path if path.endswith(".lastgood.h5") or ".ckpt" in os.path.basename(path) else None
@@ -375,7 +367,6 @@ class Run:
         self._check_consistent(fields, attrs, path)
         self._complete_fields(fields, wanted, path)  # before anything is changed
         cols = np.floor((fields["x"][:, s.axis] - s.grid.origin[s.axis]) * s.grid.inv_h).astype(np.int64)
-        from decomposition import alltoallv_fields
         s.particles.fields = alltoallv_fields(self.comm, fields, s.decomp.owner_of_columns(cols))
         s.t, s.step_count, s.dt = float(attrs["time"]), int(attrs["step"]), float(attrs["dt"])
         if attrs.get("step_setting") != self._step_setting():
@@ -397,8 +388,6 @@ class Run:
 
     def _check_consistent(self, fields, attrs, path):
         """Refuse (on every rank) a checkpoint whose state this scene cannot continue."""
-        from pmpm.errors import ConfigError
-        from decomposition.slab import block_range
         s = self.solver
         reason = None
         try:
@@ -451,13 +440,11 @@ class Run:
         bounded): a diverging state never becomes a regular checkpoint."""
         if not self.write:
             return None
-        from pmpm.io import write_checkpoint
         self.flush_history()  # so a restart from this checkpoint misses no history row
         s = self.solver
         if snap is None:
             s.check_health()
             snap = _Snapshot(s)
-        from pmpm.io.checkpoint import _next_slot
         target = path or (_next_slot(self._base()) if self.rank == 0 else None)
         self._ensure_space(target or self.path, s.n_total * self._row_bytes(snap.fields), replaces=target)
         sums = self.comm.allreduce(np.array([snap.energies[k] for k in ACCUMULATED]))
@@ -546,8 +533,7 @@ class Run:
             out.append("deformation gradient F per particle")
         out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
         out += s.transfer.describe()
-        if hasattr(s, "describe"):  # solvers that add physics of their own (contact)
-            out += s.describe()
+        out += s.grid_fields.describe()   # contact
         return out
 
     def execute(self):
@@ -647,8 +633,6 @@ class Run:
         the same message, which the command line prints once as its error line. The newest
         state that passed the health checks goes to ``<stem>.lastgood.h5``; the regular
         checkpoints are left as they are."""
-        from pmpm.errors import OutputWriteError
-        from pmpm.io.checkpoint import lastgood_path
         try:
             self._guard(self.path, self.flush_history)
             if not self.write:
@@ -700,17 +684,3 @@ def _next_multiple(t, interval, eps, include_now):
 
 def _checkpoint_base(path):
     return path[:-3] if path.endswith(".h5") else path
-
-
-class _CallableModule(types.ModuleType):
-    """``pmpm.run(scene, overrides=...)`` is the Python API (:func:`pmpm.api.run`), and
-    ``pmpm.run`` is also this module: importing a submodule binds its name on the package, so
-    the name cannot be a plain function. The module is made callable instead."""
-
-    def __call__(self, *args, **kwargs):
-        """Run a scene and return its results: :func:`pmpm.api.run` (docs/api.md)."""
-        from pmpm.api import run
-        return run(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

@@ -30,6 +30,7 @@ import statistics
 import sys
 import time
 
+from pmpm.benchmarks.args import positive
 from pmpm.benchmarks.block import block_scene
 
 __all__ = ["peer", "PmpmSide", "TaichiPeer", "TaichiMLSPeer", "PEERS", "interleave", "INSTALL_HINT"]
@@ -457,6 +458,19 @@ def _floor(solver):
     nbytes = step_bytes_per_particle(solver)
     bandwidth = stream_triad_bandwidth()
     return nbytes, bandwidth, nbytes / bandwidth * 1e9
+
+
+def add_arguments(p):
+    """Options of ``pmpm bench peer``."""
+    p.add_argument("--particles", type=positive, nargs="+", default=[200_000, 1_000_000],
+                    help="particle counts of the block (default 200000 1000000)")
+    p.add_argument("--steps", type=positive, default=10, help="steps per timed repeat (default 10)")
+    p.add_argument("--repeat", type=positive, default=7,
+                    help="timed repeats, pmpm and the peer interleaved (default 7)")
+    p.add_argument("--peers", nargs="+", choices=["musl", "mls_quadratic", "mls_cubic"],
+                    default=["musl", "mls_quadratic", "mls_cubic"],
+                    help="the Taichi programs: plain MUSL (cubic) and MLS-MPM with APIC "
+                         "(quadratic, cubic); default all three")
 
 
 def peer(args):

@@ -30,11 +30,11 @@ scene's copy with ``cell_size`` and ``cells`` changed; ``end_time`` at least 0.2
 
 Run::
 
-    python -m pmpm.benchmarks.studies.column_loss --cells 0.1 0.05 --out /tmp/column_loss.json \
+    python -m studies.column_loss --cells 0.1 0.05 --out /tmp/column_loss.json \
         --histories /tmp/column_loss.npz --plot docs/column_loss_history.png
     # 0.025 m on two ranks (about 30 minutes on this machine, loaded), then read back:
     mpirun -n 2 pmpm /tmp/cl025/column_loss.toml
-    python -m pmpm.benchmarks.studies.column_loss --cells 0.05 \
+    python -m studies.column_loss --cells 0.05 \
         --results 0.025=/tmp/cl025/column_loss_results/column_loss.h5 --plot docs/column_loss_history.png
 """
 import argparse
@@ -47,7 +47,7 @@ import numpy as np
 
 __all__ = ["run_cell", "summarise", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "hard", "column_loss.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "hard", "column_loss.toml")
 TRACK = "above_removed"
 CUTS = ("beam_mid_left", "beam_left_end")
 EXTENT = (13.2, 4.2)    # the case's grid: 264 x 84 cells of 0.05 m

@@ -1,10 +1,10 @@
 """The whole response: what each setting loses over the elastic portal frame's record.
 
-``pmpm bench accuracy --response`` (or ``python -m pmpm.benchmarks.accuracy_response``) runs the
+``pmpm bench accuracy --response`` (or ``python -m studies.accuracy_response``) runs the
 elastic variant of cases/portal_frame.toml (undamped, step load) to ``t_end`` (0.25 s, six sway
 cycles) for each setting -- cell size, shape function, scheme, CFL number, transfer (FLIP,
 APIC, XPIC(m)) -- and compares it with the repository's continuum finite-element model
-(tests/verification/frame_fe_model.py via pmpm.benchmarks.studies.frame_fe: scikit-fem, 9-node
+(tests/verification/frame_fe_model.py via studies.frame_fe: scikit-fem, 9-node
 quadrilaterals, the same strips, supports and load, modal step response; nothing of pmpm's
 solver), read at the very particle the run's tracker follows (the FE probe moves with the
 cell size, ``mpm_track_point``). Reported per setting:
@@ -84,7 +84,7 @@ QUICK_T_END, QUICK_FE_LEVEL = 0.05, 1
 def fe_reference(t, cell, ppc, level=FE_LEVEL, h0=FE_H0, n_modes=FE_MODES):
     """The FE step response ux(t) at the particle the MPM tracker follows on a grid of ``cell``
     with ``ppc`` particles per cell, its first period and its static drift there."""
-    from pmpm.benchmarks.studies.frame_fe import fe_module
+    from studies.frame_fe import fe_module
     fe_m = fe_module()
     fe = fe_m.frame_fe(h0, level)
     data = dataclasses.replace(fe.data, ppc=ppc)
@@ -102,7 +102,7 @@ def fe_reference(t, cell, ppc, level=FE_LEVEL, h0=FE_H0, n_modes=FE_MODES):
 
 def frame_scene(setting, t_end):
     """The elastic frame with ``setting`` (regridded over the case's domain, no output)."""
-    from pmpm.benchmarks.accuracy import frame_scene as regrid
+    from studies.accuracy import frame_scene as regrid
     scene = regrid(setting.cell, setting.shape, setting.scheme, setting.ppc, t_end, cfl=setting.cfl)
     solver = dataclasses.replace(scene.solver, transfer=setting.transfer, xpic_order=setting.xpic_order)
     return dataclasses.replace(scene, solver=solver)
@@ -111,7 +111,7 @@ def frame_scene(setting, t_end):
 def run_setting(setting, t_end=T_END):
     """Run one setting: the joint's ux every SAMPLE, the energies at the end and the cost."""
     from mpi4py import MPI
-    from pmpm.benchmarks.accuracy import _timed_steps
+    from studies.accuracy import _timed_steps
     from pmpm.build import build_solver
     from pmpm.io.tracking import Tracker
     scene = frame_scene(setting, t_end)
@@ -277,7 +277,7 @@ def _jsonable(x):
 
 def study(settings, t_end, fe_level, outdir, log=sys.stderr):
     """Run ``settings`` and write the table, the CSV and the plot; returns the rows."""
-    from pmpm.benchmarks.accuracy import warm_up
+    from studies.accuracy import warm_up
     os.makedirs(outdir, exist_ok=True)
     warm_up({("frame", s.shape, s.scheme) for s in settings}, log)
     cycles = max(1, int(round(t_end / 0.0405)))
@@ -309,7 +309,7 @@ def study(settings, t_end, fe_level, outdir, log=sys.stderr):
 
 def main(argv=None, out=None):
     out = out or sys.stdout   # looked up at the call: a caller's redirect_stdout holds
-    ap = argparse.ArgumentParser(prog="python -m pmpm.benchmarks.accuracy_response", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.accuracy_response", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI test's reduced study (0.1 m, 0.05 s)")
     ap.add_argument("--outdir", default="accuracy_results", help="folder of response.{md,csv,png}")
     ap.add_argument("--only", type=int, nargs="+", metavar="K", help="run only these of the settings (0-based)")

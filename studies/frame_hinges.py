@@ -16,9 +16,9 @@ reactions' moments, and the model's hinge times, as docs/structural_results.md q
 
 Run (one rank, 5 to 15 minutes per factor on this shared machine)::
 
-    python -m pmpm.benchmarks.studies.frame_hinges --factors 1.5 2 --out /tmp/frame_hinges \
+    python -m studies.frame_hinges --factors 1.5 2 --out /tmp/frame_hinges \
         --json /tmp/frame_hinges.json
-    python -m pmpm.benchmarks.studies.frame_hinges --factors 1.5 2 --compare /tmp/frame_hinges
+    python -m studies.frame_hinges --factors 1.5 2 --compare /tmp/frame_hinges
 """
 import argparse
 import dataclasses
@@ -29,11 +29,11 @@ import sys
 
 import numpy as np
 
-from pmpm.benchmarks.studies import verification_models
+from studies import verification_models
 
 __all__ = ["scaled_scene", "run_factor", "main"]
 
-CASE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "cases", "portal_frame.toml")
+CASE = os.path.join(os.path.dirname(__file__), "..", "cases", "portal_frame.toml")
 
 
 def scaled_scene(factor, outdir, t_end=None, case=CASE):
@@ -54,7 +54,7 @@ def run_factor(factor, outdir, t_end=None):
     from pmpm.io.post import postprocess
     from pmpm.results.hinges import hinge_rows
     from pmpm.results.post import read_tables
-    from pmpm.run import Run
+    from pmpm.runner import Run
     scene = scaled_scene(factor, outdir, t_end)
     summary = Run(scene, MPI.COMM_SELF).execute()
     postprocess([scene], [summary["output"]])
