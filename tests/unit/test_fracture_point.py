@@ -286,27 +286,33 @@ def test_kernel_epilogue_matches_the_numpy_twin(formulation):
     assert np.any(state["damage"][phase == 0] >= 1.0)   # some intact points fail in this increment
 
 
-# planted bug: fracture_arguments() returning the parameters even without fracture -> no
-# longer bit-identical (and the kernel would need the fields)
-def test_without_fracture_the_bilinear_update_is_unchanged():
-    """A material that names fracture but never fails (huge eta) updates its stress exactly as
-    one without fracture (the same point function); the fields of an unfractured material are
-    not there at all."""
+# planted bugs: KinematicHardening.update_stress running the fracture passes without fracture
+# (its `is None` test inverted) -> the monkeypatched prelude raises; the prelude handing a
+# point's effective stress to an intact point -> not bit-identical
+def test_without_fracture_the_plain_kernel_runs_alone(monkeypatch):
+    """A material without fracture runs its plain kernel only (the fracture passes are not
+    called), and one that names fracture but never fails (huge eta) updates its stress
+    bit-identically: the passes leave an intact point's update to the plain kernel."""
     rng = np.random.default_rng(3)
     n = 200
     de = rng.normal(size=(n, 3)) * 2 * SY / E
     plain = make("bilinear_vonmises", hardening=0.05, fracture=False)
     assert not set(F.FRACTURE_FIELDS) & set(plain.state_fields)
-    assert plain.fracture_arguments({}) == (None,) * 5
     frac = make_material(dict(type="bilinear_vonmises", E=E, nu=NU, density=7850.0, yield_stress=SY,
                               hardening=0.05, fracture=dict(model="void_growth", eta=1e9,
                                                             fracture_energy=GF, length=LENGTH)),
                          KEY, "plane_stress")
-    out = []
-    for m in (plain, frac):
+
+    def updated(m, steps=5):
         s = np.zeros((n, 4))
         st = {k: np.zeros((n,) + shape) for k, shape in m.state_fields.items()}
-        for _ in range(5):
+        for _ in range(steps):
             m.update_stress(s, de, st, np.zeros(n, np.int32), -1)
-        out.append(s)
-    assert np.array_equal(out[0], out[1])
+        return s
+
+    with_fracture = updated(frac)
+
+    def refuse(*args):
+        raise AssertionError("the fracture passes ran for a material without fracture")
+    monkeypatch.setattr(F, "prelude", refuse)
+    assert np.array_equal(updated(plain), with_fracture)

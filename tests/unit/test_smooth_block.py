@@ -45,8 +45,7 @@ def test_block_path_matches_the_scalar_path(plane_strain, N):
     ref = _scalar_reference(stress, back, de, params, plane_strain)
     s, b = stress.copy(), back.copy()
     eps_p, eq, work = np.zeros((300, 3)), np.zeros(300), np.zeros(300)
-    sv._update_smooth(s, de, b, eps_p, eq, work, params, plane_strain, np.zeros(300, np.int32), -1,
-                      None, None, None, None, None)
+    sv._update_smooth(s, de, b, eps_p, eq, work, params, plane_strain, np.zeros(300, np.int32), -1)
     # round-off: the block path evaluates the model where the scalar one takes its exact elastic
     # shortcuts (H1 < 2^-53 there), and both sum the same terms in the same order otherwise
     scale = SY
@@ -70,7 +69,7 @@ def test_large_increments_and_other_materials_take_the_right_path():
     ref = _scalar_reference(stress, back, de, params, False)
     s, b = stress.copy(), back.copy()
     eq, work = np.zeros(200), np.zeros(200)
-    sv._update_smooth(s, de, b, None, eq, work, params, False, mat, 0, None, None, None, None, None)
+    sv._update_smooth(s, de, b, None, eq, work, params, False, mat, 0)
     mine = mat == 0
     np.testing.assert_allclose(s[mine], ref[0][mine], rtol=0, atol=1e-12 * SY)
     np.testing.assert_allclose(eq[mine], ref[3][mine], rtol=0, atol=1e-12 * SY / E)

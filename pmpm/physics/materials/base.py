@@ -214,9 +214,26 @@ class KinematicHardening(Material):
         if self.fracture is not None and self.fracture["length"] is None:
             self.fracture_length = float(h)
 
+    def update_stress(self, stress, de, state, mat_ids, which):
+        """The material's plain kernel (:meth:`plastic_update`), between the fracture option's
+        two passes when the scene names it (pmpm.physics.materials.fracture)."""
+        if self.fracture is None:
+            self.plastic_update(stress, de, state, mat_ids, which)
+            return
+        fp, damage, fwork, crack, eff = self.fracture_arguments(state)
+        eq, work = state["eps_p_eq"], state["plastic_work"]
+        ids, phase, old, eq0, work0 = fracture_option.prelude(stress, de, eq, work, mat_ids, which,
+                                                              self.plane_strain, fp, damage, crack, eff)
+        self.plastic_update(stress, de, state, ids, 0)
+        fracture_option.epilogue(phase, old, eq0, work0, stress, de, eq, work, eff, crack, damage, fwork, fp)
+
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """The plastic model's own stress update (its numba kernel): see :meth:`update_stress`."""
+        raise NotImplementedError
+
     def fracture_arguments(self, state):
-        """The kernels' fracture arguments: (parameters, damage, fracture_work, crack_strain,
-        effective_stress), all None without fracture (the kernels compile the option out)."""
+        """The fracture passes' arguments: (parameters, damage, fracture_work, crack_strain,
+        effective_stress), all None without fracture."""
         if self.fracture is None:
             return None, None, None, None, None
         if self.fracture_length is None:

@@ -42,7 +42,6 @@ import numba as nb
 import numpy as np
 
 from pmpm.physics.materials.base import KinematicHardening
-from pmpm.physics.materials.fracture import begin_point, elastic_point, end_point
 from pmpm.physics.materials.linear_elastic import elastic_increment
 
 __all__ = ["BilinearVonMises"]
@@ -144,117 +143,6 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
         eps_eq[p] += dl
 
 
-@nb.njit(cache=True)
-def _update_bilinear_fracture(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which,
-                              fp, damage, fwork, crack, eff):
-    """:func:`_update_bilinear` with the ductile fracture option (pmpm.physics.materials.fracture):
-    each point's update between the fracture prelude and epilogue. A kernel of its own so that
-    the plain one stays as it was: the plain loop through the point function below measured
-    25-50% slower per yielding point (numba's inlining of a 70-line function), so the point's
-    update is written out twice, here through :func:`_bilinear_point` and in the plain loop."""
-    E, nu, sy, alpha = params[0], params[1], params[2], params[3]
-    c = alpha * E / (1.0 - alpha)
-    k = c / sy
-    mu = E / (2.0 * (1.0 + nu))
-    pa = k + E / (2.0 * sy * (1.0 - nu))
-    pb = k + 3.0 * mu / sy
-    sy2 = sy * sy
-    for p in range(stress.shape[0]):
-        if which >= 0 and mat_ids[p] != which:
-            continue
-        phase, old = begin_point(p, stress, eff, crack, damage)
-        eq0, work0 = eps_eq[p], work[p]
-        if phase == 2:   # released: elastic in its effective stress
-            elastic_point(p, stress, de, plane_strain, E, nu)
-        else:
-            _bilinear_point(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, sy, c, k,
-                            mu, pa, pb, sy2)
-        end_point(p, phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damage, fwork, fp)
-
-
-@nb.njit(cache=True, inline="always")
-def _bilinear_point(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, sy, c, k, mu, pa, pb, sy2):
-    """One point's backward-Euler increment (module doc): the loop body of :func:`_update_bilinear`
-    (keep the two the same; tests/unit/test_fracture_point.py checks them bit for bit)."""
-    ds = elastic_increment(E, nu, plane_strain, de[p, 0], de[p, 1], de[p, 2])
-    oxx, oyy, oxy, ozz = stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3]
-    txx, tyy, txy, tzz = oxx + ds[0], oyy + ds[1], oxy + ds[2], ozz + ds[3]
-    bxx, byy, bxy, bzz = back[p, 0], back[p, 1], back[p, 2], back[p, 3]
-    xx, yy, xy, zz = txx - bxx, tyy - byy, txy - bxy, tzz - bzz
-    if plane_strain:
-        phi2 = 0.5 * ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2) + 3.0 * xy * xy
-    else:
-        phi2 = xx * xx - xx * yy + yy * yy + 3.0 * xy * xy
-    if phi2 <= sy2:
-        stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = txx, tyy, txy, tzz
-        return
-    if plane_strain:
-        phi_tr = math.sqrt(phi2)
-        dl = (phi_tr - sy) / (c + 3.0 * mu)
-        mean = (xx + yy + zz) / 3.0
-        fd = sy / phi_tr
-        xx = (xx - mean) * fd
-        yy = (yy - mean) * fd
-        zz = (zz - mean) * fd
-        xy = xy * fd
-        f = 1.5 * dl / sy
-        dpxx, dpyy, dpxy, dpzz = f * xx, f * yy, 2.0 * f * xy, f * zz
-    else:
-        # invariants of the trial relative stress in the common eigenbasis of D and P
-        a2 = 0.25 * (xx + yy) ** 2
-        b2 = 0.75 * (xx - yy) ** 2 + 3.0 * xy * xy
-        # first Newton step from d_lambda = 0 reuses the trial Phi^2 (= f2 there)
-        excess = math.sqrt(phi2) / sy - 1.0
-        dl = phi2 * excess / (a2 * pa + b2 * pb)
-        for _ in range(_MAXIT):
-            if excess <= _LAST_STEP:
-                # quadratic convergence: the error after the step just taken is O(excess^2),
-                # at round-off, so skip the evaluation that would only confirm it
-                break
-            u = 1.0 + pa * dl
-            v = 1.0 + pb * dl
-            iuv = 1.0 / (u * v)  # one division for both scale factors
-            ia = v * iuv
-            ib = u * iuv
-            f2 = a2 * ia * ia + b2 * ib * ib
-            excess = math.sqrt(f2) / sy - 1.0  # Phi / sigma_y - 1 >= 0 (decreases to 0)
-            # Newton on q = 1/Phi - 1/sigma_y:  q / q' = 2 f2 (1 - Phi/sigma_y) / (-d f2/d dl)
-            dl += f2 * excess / (a2 * pa * ia * ia * ia + b2 * pb * ib * ib * ib)
-        u = 1.0 + pa * dl
-        v = 1.0 + pb * dl
-        iuv = 1.0 / (u * v)
-        ia = v * iuv
-        ib = u * iuv
-        sp = (xx + yy) * ia
-        sm = (xx - yy) * ib
-        xx = 0.5 * (sp + sm)
-        yy = 0.5 * (sp - sm)
-        xy = xy * ib
-        zz = 0.0
-        # n = 3 P xi / (2 sigma_y): the same n the projection above was built with, so
-        # sigma = sigma_tr - D d_eps_p holds to round-off whatever the Newton residual
-        f = dl / sy
-        dpxx, dpyy, dpxy = f * (xx - 0.5 * yy), f * (yy - 0.5 * xx), 3.0 * f * xy
-        dpzz = -(dpxx + dpyy)
-        mean = 0.0
-    # xx..zz hold dev(xi) in plane strain (the pressure is added back below), xi in plane stress
-    g = k * dl
-    bxx += g * xx
-    byy += g * yy
-    bxy += g * xy
-    bzz += g * zz
-    nxx, nyy, nxy, nzz = xx + bxx + mean, yy + byy + mean, xy + bxy, zz + bzz + mean
-    work[p] += 0.5 * ((oxx + nxx) * dpxx + (oyy + nyy) * dpyy + (oxy + nxy) * dpxy
-                      + (ozz + nzz) * dpzz)
-    stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = nxx, nyy, nxy, nzz
-    back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
-    if eps_p is not None:  # kept only when output (diagnostic_fields)
-        eps_p[p, 0] += dpxx
-        eps_p[p, 1] += dpyy
-        eps_p[p, 2] += dpxy
-    eps_eq[p] += dl
-
-
 class BilinearVonMises(KinematicHardening):
     """Von Mises plasticity with linear (Ziegler) kinematic hardening, by return mapping.
 
@@ -283,8 +171,9 @@ class BilinearVonMises(KinematicHardening):
         return (f"{self.name} (E={self.E:g}, nu={self.nu:g}, density={self.density:g}, "
                 f"yield_stress={self.yield_stress:g}, hardening={self.hardening:g}; {self.formulation})")
 
-    def update_stress(self, stress, de, state, mat_ids, which):
-        """Advance ``stress`` and the plastic state in place by the strain increments ``de``.
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """Advance ``stress`` and the plastic state in place by the strain increments ``de``
+        (the plain kernel; :meth:`KinematicHardening.update_stress` adds the fracture option).
 
         Parameters
         ----------
@@ -296,9 +185,5 @@ class BilinearVonMises(KinematicHardening):
         which : int
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
-        args = (stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"], state["plastic_work"],
-                self.params, self.plane_strain, mat_ids, which)
-        if self.fracture is None:
-            _update_bilinear(*args)
-        else:
-            _update_bilinear_fracture(*args, *self.fracture_arguments(state))
+        _update_bilinear(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
+                         state["plastic_work"], self.params, self.plane_strain, mat_ids, which)

@@ -40,9 +40,12 @@ Energy
     which the step scaled by 1 + tr(de)), so the energy balance of a failed point closes to
     round-off in joules (tests/unit/test_fracture_point.py).
 
-The kernels' fracture code is compiled out when the scene names no fracture: the materials'
-kernels receive None for the parameters and the fields (numba prunes the branches; a separate
-specialisation). :func:`fracture_point_reference` is the NumPy twin of the per-point epilogue.
+The fracture option is two passes around the material's own, unchanged kernel (:func:`prelude`,
+then the kernel on the points not yet released, then :func:`epilogue`;
+KinematicHardening.update_stress): a scene that names no fracture runs the plain kernel alone,
+so the option costs it nothing, and the materials' kernels (the smooth model's vectorised block
+path included) serve the fracture runs as they are. :func:`fracture_point_reference` is the
+NumPy twin of the per-point epilogue.
 """
 import math
 
@@ -54,6 +57,7 @@ from pmpm.errors import ConfigError
 
 __all__ = ["FractureModel", "VoidGrowth", "FRACTURE_MODELS", "read_fracture", "FRACTURE_FIELDS",
            "triaxiality", "fracture_strain", "release", "begin_point", "end_point", "elastic_point",
+           "prelude", "epilogue",
            "fracture_point_reference", "triaxiality_reference", "CUTOFF"]
 
 #: the energy failed material points dissipate (J): the field ``fracture_work`` (J/m^3) over the
@@ -265,6 +269,48 @@ def elastic_point(p, stress, de, plane_strain, E, nu):
         stress[p, 0] += c * (de[p, 0] + nu * de[p, 1])
         stress[p, 1] += c * (de[p, 1] + nu * de[p, 0])
         stress[p, 2] += c * 0.5 * (1 - nu) * de[p, 2]
+
+
+# -- the passes around the material's own kernel --------------------------------------------
+@nb.njit(cache=True)
+def prelude(stress, de, eps_eq, work, mat_ids, which, plane_strain, fp, damage, crack, eff):
+    """Before the material's plain kernel: each failed point's effective stress put where the
+    kernel reads it, a released point's advanced elastically here. Returns the kernel's
+    material ids (0: update, -1: leave alone) and what :func:`epilogue` needs: each point's
+    state (-1: another material's), transmitted stress, eps_p_eq and plastic work before."""
+    n = stress.shape[0]
+    ids = np.empty(n, np.int32)
+    phase = np.empty(n, np.int8)
+    old = np.empty((n, 4))
+    eq0 = np.empty(n)
+    work0 = np.empty(n)
+    E, nu = fp[_E], fp[_NU]
+    for p in range(n):
+        if which >= 0 and mat_ids[p] != which:
+            ids[p] = -1
+            phase[p] = -1
+            continue
+        ph, o = begin_point(p, stress, eff, crack, damage)
+        phase[p] = ph
+        for k in range(4):
+            old[p, k] = o[k]
+        eq0[p] = eps_eq[p]
+        work0[p] = work[p]
+        if ph == 2:   # released: elastic in its effective stress, no plasticity
+            elastic_point(p, stress, de, plane_strain, E, nu)
+            ids[p] = -1
+        else:
+            ids[p] = 0
+    return ids, phase, old, eq0, work0
+
+
+@nb.njit(cache=True)
+def epilogue(phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damage, fwork, fp):
+    """After the material's plain kernel: :func:`end_point` for every point of the material."""
+    for p in range(stress.shape[0]):
+        if phase[p] >= 0:
+            end_point(p, phase[p], (old[p, 0], old[p, 1], old[p, 2], old[p, 3]), eq0[p], work0[p],
+                      stress, de, eps_eq, work, eff, crack, damage, fwork, fp)
 
 
 # -- the NumPy reference twin ----------------------------------------------------------------

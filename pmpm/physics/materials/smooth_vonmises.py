@@ -79,7 +79,6 @@ import numba as nb
 import numpy as np
 
 from pmpm.physics.materials.base import KinematicHardening
-from pmpm.physics.materials.fracture import begin_point, elastic_point, end_point
 from pmpm.physics.materials.linear_elastic import elastic_increment
 
 __all__ = ["SmoothVonMises", "smooth_rate"]
@@ -351,8 +350,7 @@ _BLOCK = 64
 # division of each stage carries no exception branch and the block loop can be vectorised (the
 # one 0/0, at a stress-free point, is discarded by smooth_rate)
 @nb.njit(cache=True, error_model="numpy")
-def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which,
-                   fp, damage, fwork, crack, eff):
+def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which):
     """The particle loop of :meth:`SmoothVonMises.update_stress` (arrays updated in place).
 
     Two paths. Increments within one sub-step (nearly all of them in explicit MPM, whose
@@ -362,11 +360,7 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     particles per AVX-512 instruction: the sqrt and the division of each stage no longer
     serialise the particles), and the results are copied back. It evaluates the model even
     where the scalar path would take its exact elastic shortcuts; with beta ~ H1 below 2^-53
-    there, the two agree to round-off. Everything else takes the sub-stepped scalar path.
-
-    With fracture (``fp`` not None) every point takes the scalar path between the fracture
-    prelude and epilogue (pmpm.physics.materials.fracture); without it (None) that loop is
-    pruned and the kernel is the plain one (a separate specialisation)."""
+    there, the two agree to round-off. Everything else takes the sub-stepped scalar path."""
     E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
     kint = 0
     if N == math.floor(N) and N <= _MAX_INT_POWER:
@@ -379,19 +373,6 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     isy = 1.0 / sy
     phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2  # H1 < _H1_ROUNDOFF below this Phi^2
     n = stress.shape[0]
-    if fp is not None:
-        for p in range(n):
-            if which >= 0 and mat_ids[p] != which:
-                continue
-            phase, old = begin_point(p, stress, eff, crack, damage)
-            eq0, work0 = eps_eq[p], work[p]
-            if phase == 2:   # released: elastic in its effective stress
-                elastic_point(p, stress, de, plane_strain, E, nu)
-            else:
-                _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps,
-                            mu, isy, N, kint, xfloor, c, h, phi_quiet2)
-            end_point(p, phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damage, fwork, fp)
-        return
     if kint == 0:
         for p in range(n):
             if which < 0 or mat_ids[p] == which:
@@ -475,8 +456,9 @@ class SmoothVonMises(KinematicHardening):
                 f"yield_stress={self.yield_stress:g}, hardening={self.hardening:g}, "
                 f"smoothness={self.smoothness:g}; {self.formulation})")
 
-    def update_stress(self, stress, de, state, mat_ids, which):
-        """Advance ``stress`` and the plastic state in place by the strain increments ``de``.
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """Advance ``stress`` and the plastic state in place by the strain increments ``de``
+        (the plain kernel; :meth:`KinematicHardening.update_stress` adds the fracture option).
 
         Parameters
         ----------
@@ -489,5 +471,4 @@ class SmoothVonMises(KinematicHardening):
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
         _update_smooth(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
-                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which,
-                       *self.fracture_arguments(state))
+                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which)
