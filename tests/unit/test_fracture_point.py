@@ -88,7 +88,7 @@ PATHS = {
 
 
 # planted bugs (run with NUMBA_DISABLE_JIT=1): fracture_strain with exp(-1.0 T) instead of
-# exp(-1.5 T) -> 6 of 8 fail (all but shear, T = 0); the triaxiality of end_point given a wrong
+# exp(-1.5 T) -> 6 of 8 fail (all but shear, T = 0); the triaxiality of the epilogue given a wrong
 # szz (szz + 0.2 (sxx + syy)) -> 6 of 8 fail; failure tested at damage >= 1.5 -> the failed-
 # state checks fail
 @pytest.mark.parametrize("kind", ["bilinear_vonmises", "smooth_vonmises"])
@@ -232,7 +232,7 @@ def test_released_point_bears_compression_after_closing(kind):
     assert pt.stress[0, 0] == pytest.approx(-50 * step * E, rel=1e-9)
 
 
-# planted bug: end_point skipping the fracture work of released points (phase 2) -> both fail
+# planted bug: _soften skipping the fracture work of released points (phase 2) -> both fail
 @pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
 def test_kernel_epilogue_matches_the_numpy_twin(formulation):
     """Random intact, softening and released points through the bilinear kernel with
