@@ -29,6 +29,9 @@ def _scenes(scene, overrides, variant):
             raise TypeError("overrides need the scene as a path or a dict of TOML data, not a Scene "
                             "(a Scene is already resolved)")
         check_run_names([scene])
+        # a Scene built or changed in Python never passed the parser's bounds: checked here
+        from pmpm.scene.limits import check_work_bounds
+        check_work_bounds(scene)
         return [scene]
     if isinstance(scene, (str, os.PathLike)):
         path = os.fspath(scene)

@@ -218,11 +218,15 @@ def expand_case(args):
     if args.output is None:
         sys.stdout.write(text)
         return 0
-    if os.path.abspath(args.output) == os.path.abspath(args.case):
-        return _fail(f"{args.output}: would overwrite the scene being expanded", EXIT_BAD_INPUT)
+    from pmpm.io import ownership
+    # through the gate: never the scene under any name (same device and inode: a link, a hard
+    # link, a path through a linked folder), never a link or a FIFO; written to an exclusive
+    # temporary and renamed, so a full disk leaves the old file whole
+    ownership.protect_input(args.case)
     try:
-        with open(args.output, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        ownership.replace_into(args.output, lambda fh: fh.write(text))
+    except ownership.ForeignFileError as exc:
+        return _fail(str(exc), EXIT_BAD_INPUT)
     except OSError as exc:
         return _fail(f"{args.output}: cannot write ({exc.strerror or type(exc).__name__})", EXIT_WRITE_FAILED)
     print(f"wrote {args.output}")
@@ -247,6 +251,10 @@ def run_case(args):
             print(f"{args.case}: valid ({len(scenes)} run(s))")
             for line in _frame_report(args):
                 print(line)
+            from pmpm.scene.setup_particles import load_box_report
+            for scene in scenes:  # a load box that catches several bodies is said, not refused
+                for line in load_box_report(scene):
+                    print(line)
         return 0
     if args.restart and len(scenes) > 1:
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",

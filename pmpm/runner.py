@@ -26,12 +26,14 @@ from pmpm.core.effects import energy_terms
 from pmpm.errors import ConfigError, OutputWriteError, ParticleExitError, UnstableRunError
 from pmpm.io import OutputFile, read_checkpoint, write_checkpoint
 from pmpm.io.checkpoint import _next_slot, _write_reason, checkpoint_paths, lastgood_path
-from pmpm.io.ownership import ForeignFileError, check_owned, remove_owned
+from pmpm.io.ownership import (ForeignFileError, check_manifest, check_owned, claim_run, protect_input,
+                               release_claims, remove_owned)
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
+from pmpm.io.validate import safe_to_open_hdf5
 from pmpm.results.recorder import UNITS, StructuralRecorder
 from pmpm.scene.config import check_written_scene
 from pmpm.scene.fingerprint import first_difference, fingerprint, scene_record
-from pmpm.scene.names import output_base, run_files
+from pmpm.scene.names import output_base, run_files, run_name
 from pmpm.stop import make_stop_check
 
 __all__ = ["Run", "output_path", "energy_summary"]
@@ -75,6 +77,8 @@ RUN_SUFFIXES = (".h5", ".ckpt0.h5", ".ckpt1.h5", ".lastgood.h5")
 def _owner(path):
     """(scene file, variant) that wrote a pmpm HDF5 file, or None if unknown / not ours."""
     import h5py
+    if not safe_to_open_hdf5(path):  # never opened: a FIFO (would hang), a crashing file
+        return None                  # (check_owned then refuses it in one line)
     try:
         with h5py.File(path, "r") as f:
             if "scene_file" in f.attrs:  # results file
@@ -285,11 +289,16 @@ class Run:
         foreign = None
         if self.rank == 0 and bad is None:
             # every file the run and its post-processing may write over: pmpm's own or refused
+            protect_input(self.scene.path)  # the gate never writes the scene, under any name
             try:
+                if os.path.isdir(self.scene.output.directory):  # first: another run's files are its own
+                    claim_run(self.scene.output.directory, run_name(self.scene))
+                check_manifest(self.scene.output.directory)  # its schema, before anything is written
                 for _key, name in run_files(self.scene):
                     check_owned(os.path.join(self.scene.output.directory, name), self.scene.stem)
             except ForeignFileError as exc:
                 foreign = (exc.key, exc.reason)
+                release_claims()  # refused: this run writes nothing, its claim included
         bad, foreign = self.comm.bcast((bad, foreign))
         if bad:
             raise ConfigError("output.directory", f"{bad} belongs to a run of another scene file "
@@ -304,9 +313,15 @@ class Run:
         if self.rank == 0:
             try:
                 os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
+                # this run's names claimed before any is written: a second run of them is refused
+                claim_run(os.path.dirname(self.path) or ".", run_name(self.scene))
+            except ForeignFileError as exc:
+                problem = (exc.key, exc.reason)
             except OSError as exc:
                 problem = exc.strerror or type(exc).__name__
         problem = self.comm.bcast(problem)
+        if isinstance(problem, tuple):
+            raise ForeignFileError(*problem)
         if problem:
             raise ConfigError("output.directory", f"{self.scene.output.directory!r} cannot be "
                                                   f"created ({problem})")
@@ -656,6 +671,7 @@ class Run:
         if self.output is not None:
             output, self.output = self.output, None
             self._guard(self.path, output.close)
+            release_claims()  # the run's files are whole: another run may take the names
             # with positions among the fields the writer rewrote the sidecar after each frame
             if not output.xdmf and self.rank == 0:
                 logger.warning("no XDMF sidecar: output.fields has no 'x' (the particle positions)")

@@ -606,24 +606,56 @@ def add_arguments(p):
                         "model, cost (studies/accuracy_response.py; with --quick, --outdir)")
 
 
+#: an accuracy.csv holds a few hundred rows; a larger file is not one
+MAX_CSV_BYTES = 16 << 20
+
+
 def read_csv(path):
-    """Rows of an earlier accuracy.csv, typed as the sweep makes them."""
+    """Rows of an earlier accuracy.csv, typed as the sweep makes them; anything else (a missing
+    file, a folder, a FIFO or device, binary bytes, a missing column, a non-number) is a
+    ConfigError naming the file (one line, exit 2)."""
+    from pmpm.errors import ConfigError
+    import stat as _stat
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ConfigError(path, f"cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if not _stat.S_ISREG(st.st_mode):
+        raise ConfigError(path, "is not a regular file (a folder, FIFO or device): not an accuracy.csv")
+    if st.st_size > MAX_CSV_BYTES:
+        raise ConfigError(path, f"is larger than {MAX_CSV_BYTES >> 20} MiB: not an accuracy.csv")
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(MAX_CSV_BYTES + 1).decode("utf-8")
+        if "\0" in text:
+            raise ValueError("holds NUL bytes (a binary file)")
+        return _typed_rows(csv.DictReader(text.splitlines()))
+    except UnicodeDecodeError:
+        raise ConfigError(path, "is not UTF-8 text: not an accuracy.csv") from None
+    except KeyError as exc:
+        raise ConfigError(path, f"has no column {exc.args[0]!r}: not an accuracy.csv") from None
+    except (ValueError, TypeError, csv.Error) as exc:
+        raise ConfigError(path, f"is not an accuracy.csv ({exc})") from None
+
+
+def _typed_rows(reader):
     rows = []
-    with open(path, newline="") as fh:
-        for r in csv.DictReader(fh):
-            row = {"problem": r["problem"], "shape": r["shape"], "ppc": int(r["ppc"]), "scheme": r["scheme"],
-                   "cell_size": float(r["cell_size"]), "status": r["status"]}
-            for k in ("particles", "steps"):
-                if r[k]:
-                    row[k] = int(r[k])
-            for k in ("wall_s", "cpu_s", "error", "peak_mm", "t_peak_s", "peak_track_mm"):
-                if r[k]:
-                    row[k] = float(r[k])
-            if row["status"] == "reference":
-                row["status"] = "ok"
-            if row["problem"] == "frame":
-                row.pop("error", None)
-            rows.append(row)
+    for r in reader:
+        row = {"problem": r["problem"], "shape": r["shape"], "ppc": int(r["ppc"]), "scheme": r["scheme"],
+               "cell_size": float(r["cell_size"]), "status": r["status"]}
+        for k in ("particles", "steps"):
+            if r[k]:
+                row[k] = int(r[k])
+        for k in ("wall_s", "cpu_s", "error", "peak_mm", "t_peak_s", "peak_track_mm"):
+            if r[k]:
+                row[k] = float(r[k])
+        if row["status"] == "reference":
+            row["status"] = "ok"
+        if row["problem"] == "frame":
+            row.pop("error", None)
+        rows.append(row)
+    if not rows:
+        raise ValueError("holds no rows")
     return rows
 
 
@@ -635,13 +667,40 @@ def study(quick=False, outdir="accuracy_results", log=None, out=None, command=No
     log = sys.stderr if log is None else log
     out = sys.stdout if out is None else out
     from studies import accuracy_cfl
+    from pmpm.errors import ConfigError
+    from pmpm.io import ownership
     t_study = time.perf_counter()
-    os.makedirs(outdir, exist_ok=True)
+    if os.path.lexists(outdir) and not os.path.isdir(outdir):
+        raise ConfigError(outdir, "--outdir exists and is not a folder")
     csv_path = os.path.join(outdir, "accuracy.csv")
     cfl_rows = best = None
-    if from_csv:
-        rows = read_csv(from_csv)
-    else:
+    rows = read_csv(from_csv) if from_csv else None  # checked before anything is written
+    # every file through the gate, all claimed before the first is written: a user's file, a
+    # link or a FIFO of these names stops the study before it writes; a failure (or Ctrl-C)
+    # takes back the study's files and restores the previous ones (pmpm.io.ownership)
+    with ownership.writing("accuracy") as w:
+        if from_csv:
+            ownership.protect_input(from_csv)  # redone in place: the input is read, never rewritten
+        names = ["md", "png"] + ([] if from_csv and _same_file(from_csv, csv_path) else ["csv"])
+        names += ["cfl.csv"] if (cfl or cfl_only) and not from_csv else []
+        for name in names:
+            w.claim(os.path.join(outdir, "accuracy_cfl.csv" if name == "cfl.csv" else f"accuracy.{name}"))
+        return _study(rows, quick, outdir, csv_path, t_study, log, out, command, clock, cfl, cfl_only,
+                      write_rows="csv" in names)
+
+
+def _same_file(a, b):
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _study(rows, quick, outdir, csv_path, t_study, log, out, command, clock, cfl, cfl_only, write_rows):
+    from pmpm.benchmarks import accuracy_cfl
+    from_csv = rows is not None
+    cfl_rows = best = None
+    if not from_csv:
         runs = plan(quick)
         if cfl_only:
             runs = [r for r in runs if r[0] == "frame" and r[1:4] == tuple(REFERENCE.values())
@@ -650,8 +709,8 @@ def study(quick=False, outdir="accuracy_results", log=None, out=None, command=No
         rows = _sweep(runs, csv_path, log)
         if cfl or cfl_only:
             cfl_rows, best = accuracy_cfl.run_cfl_sweep(quick, log)
-    return _report(rows, quick, outdir, csv_path, None if from_csv else t_study, out, command, clock,
-                   cfl_rows=cfl_rows, best=best)
+    return _report(rows, quick, outdir, csv_path if write_rows else None, None if from_csv else t_study, out,
+                   command, clock, cfl_rows=cfl_rows, best=best)
 
 
 def _sweep(runs, csv_path, log):
@@ -677,7 +736,7 @@ def _sweep(runs, csv_path, log):
         cost = f", wall {row['wall_s']:.2f} s, {row['steps']} steps" if row.get("wall_s") is not None else ""
         print(f"[accuracy] {k + 1}/{len(runs)} {problem} {shape} ppc {ppc} {scheme} h {h:.4g}: {what}{cost}",
               file=log, flush=True)
-        write_csv(rows, csv_path)   # a stopped study keeps what it finished
+        write_csv(rows, csv_path)   # a failed run keeps the rows before it (a crash of the study takes its files back)
     return rows
 
 
@@ -714,7 +773,8 @@ def _report(rows, quick, outdir, csv_path, t_study, out, command, clock="wall_s"
             for r in cfl_rows:
                 w.writerow({k: v for k, v in r.items() if v is not None})
         summary["files"]["cfl_csv"] = cfl_csv
-    write_csv(rows, csv_path)
+    if csv_path is not None:  # not when the rows were read from it (--from-csv in place)
+        write_csv(rows, csv_path)
     write_markdown(rows, summary, summary["files"]["md"])
     write_plot(rows, summary["files"]["png"], clock)
     print(markdown_table(rows), file=out)
@@ -781,6 +841,11 @@ def accuracy(args):
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:
         command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()
-    study(args.quick, args.outdir, command=command, from_csv=args.from_csv, clock=args.clock + "_s",
-          cfl=not args.no_cfl, cfl_only=args.cfl_only)
+    from pmpm.errors import ConfigError
+    try:
+        study(args.quick, args.outdir, command=command, from_csv=args.from_csv, clock=args.clock + "_s",
+              cfl=not args.no_cfl, cfl_only=args.cfl_only)
+    except ConfigError as exc:  # a bad --from-csv, --outdir onto a file, a foreign file there
+        print(f"pmpm: error: {exc}", file=sys.stderr)
+        return 2
     return 0

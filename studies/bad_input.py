@@ -17,6 +17,12 @@ Four generators, each a hypothesis strategy over mutations of something valid:
   of a particle array's shape, dtype or the particle count must be refused.
 - ``api``: :func:`pmpm.run` and :func:`pmpm.load_scene` with generated arguments (variant,
   overrides, write, comm, progress, dataframes).
+- ``outputs``: what sits in the output folder before a run (issue 35): at one of the run's
+  output names, its old temporary names or the manifest, a symbolic link to a file outside the
+  folder, a dangling link, a FIFO, a folder, a user's file, a hard link of the scene, a garbage
+  or deeply nested manifest; the run (``case.toml --variant stiff --no-plots``) must refuse in
+  one line or leave the planted thing exactly as it was, write nothing outside the folder and
+  never hang.
 
 Each case runs in-process (:func:`cli_in_process`), in a fresh folder with a foreign file of the
 user beside it; :func:`promise_broken` says what a case broke, if anything. The CI test
@@ -34,6 +40,7 @@ import logging
 import math
 import os
 import shutil
+import stat
 import sys
 import tempfile
 import warnings
@@ -41,7 +48,7 @@ import warnings
 import numpy as np
 
 __all__ = ["BASE_SCENE", "to_toml", "cli_in_process", "tree", "promise_broken", "scene_cases",
-           "file_cases", "restart_cases", "api_cases", "make_finished_run", "main"]
+           "file_cases", "restart_cases", "api_cases", "output_cases", "make_finished_run", "main"]
 
 #: a small valid scene that holds every kind of table a scene can have (docs/scenes.md)
 BASE_SCENE = {
@@ -537,6 +544,99 @@ def check_api(kwargs, root):
     return None
 
 
+# ------------------------------------------------------------------ what sits in the output folder
+#: the names one run of BASE_SCENE's variant "stiff" writes (or wrote, as temporaries), and the
+#: manifest: every one the gate must guard
+OUTPUT_NAMES = ["case_stiff.h5", "case_stiff.xdmf", "case_stiff.ckpt0.h5", "case_stiff.ckpt1.h5",
+                "case_stiff.lastgood.h5", "case_stiff_history_tip.csv", "case_history_tip.png",
+                "case_stiff_energies.png", "case_stiff.xdmf.tmp", "pmpm-files.json"]
+#: what is planted there
+PLANTED = ["link_outside", "dangling_link", "fifo", "folder", "user_file", "hardlink_scene",
+           "manifest_garbage", "manifest_deep"]
+
+
+def output_cases(st):
+    """Strategy of (output name, planted thing) pairs, one or two of them."""
+    return st.lists(st.tuples(st.sampled_from(OUTPUT_NAMES), st.sampled_from(PLANTED)),
+                    min_size=1, max_size=2, unique_by=lambda c: c[0])
+
+
+def _plant(folder, outside, scene, name, what):
+    path = os.path.join(folder, name)
+    if what == "link_outside":
+        os.symlink(outside, path)
+    elif what == "dangling_link":
+        os.symlink(outside + ".missing", path)
+    elif what == "fifo":
+        os.mkfifo(path)
+    elif what == "folder":
+        os.mkdir(path)
+    elif what == "hardlink_scene":
+        os.link(scene, path)
+    else:
+        body = {"user_file": b"the user's own\n", "manifest_garbage": b"\x00\xff{garbage",
+                "manifest_deep": b"[" * 5000 + b"]" * 5000}[what]
+        with open(path, "wb") as fh:
+            fh.write(body)
+
+
+def _planted_state(folder, outside, names):
+    """What the planted things are now: each one's kind and content, and the outside file."""
+    state = {}
+    for name in names:
+        path = os.path.join(folder, name)
+        try:
+            mode = os.lstat(path).st_mode
+        except FileNotFoundError:
+            state[name] = None
+            continue
+        if stat.S_ISLNK(mode):
+            state[name] = ("link", os.readlink(path))
+        elif stat.S_ISREG(mode):
+            with open(path, "rb") as fh:
+                state[name] = ("file", hashlib.sha256(fh.read()).hexdigest())
+        else:
+            state[name] = ("special", stat.S_IFMT(mode))
+    with open(outside, "rb") as fh:
+        state["<outside>"] = fh.read()
+    state["<outside missing>"] = os.path.lexists(outside + ".missing")
+    return state
+
+
+def check_outputs(case, root):
+    """One output folder laid out by ``case`` through a run: what broke, or None."""
+    work = os.path.join(root, "w")
+    out = os.path.join(work, "case_results")
+    os.makedirs(out)
+    scene = os.path.join(work, "case.toml")
+    with open(scene, "w", encoding="utf-8") as fh:
+        fh.write(to_toml(BASE_SCENE))
+    outside = os.path.join(root, "outside.txt")
+    with open(outside, "w") as fh:
+        fh.write("outside the folder\n")
+    names = [name for name, _ in case]
+    for name, what in case:
+        if what.startswith("manifest_") and name != "pmpm-files.json":
+            what = "user_file"
+        _plant(out, outside, scene, name, what)
+    before = _planted_state(out, outside, names)
+    with open(scene, "rb") as fh:
+        scene_bytes = fh.read()
+    tree_before = tree(root) if all(w not in ("fifo",) for _, w in case) else None
+    code, _out, err, exc = cli_in_process(["case.toml", "--variant", "stiff", "--no-plots", "-q"], work)
+    broken = promise_broken(code, err, exc, {}, {}, codes=(0, 2))
+    if broken is not None:
+        return broken
+    if _planted_state(out, outside, names) != before:
+        return f"a planted thing changed (exit {code}): {case}"
+    with open(scene, "rb") as fh:
+        if fh.read() != scene_bytes:
+            return "the scene changed"
+    if code == 2 and tree_before is not None and tree(root) != tree_before:
+        return "refused but wrote files"
+    return None
+
+
 # ------------------------------------------------------------------------------ the study
 def run_generator(kind, cases, derandomize, collect, seed=0):
     """Run ``cases`` generated cases of ``kind``; return (count, [broken promises]).
@@ -554,8 +654,9 @@ def run_generator(kind, cases, derandomize, collect, seed=0):
             objects = _h5_objects(h5)
             strategy = file_cases(st, objects) if kind == "file" else restart_cases(st, objects)
         else:
-            strategy = scene_cases(st) if kind == "scene" else api_cases(st)
+            strategy = {"scene": scene_cases, "api": api_cases, "outputs": output_cases}[kind](st)
         checker = {"scene": lambda c, r: check_scene(c, r), "api": lambda c, r: check_api(c, r),
+                   "outputs": lambda c, r: check_outputs(c, r),
                    "file": lambda c, r: check_file(c, run_dir, r),
                    "restart": lambda c, r: check_restart(c, run_dir, r)}[kind]
 
@@ -587,11 +688,11 @@ def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m studies.bad_input",
                                 description="Generated bad input against pmpm's promise.")
     p.add_argument("--cases", type=int, default=2000, help="cases in all, shared by the generators")
-    p.add_argument("--kinds", nargs="+", default=["scene", "file", "restart", "api"],
-                   choices=["scene", "file", "restart", "api"])
+    p.add_argument("--kinds", nargs="+", default=["scene", "file", "restart", "api", "outputs"],
+                   choices=["scene", "file", "restart", "api", "outputs"])
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
-    share = {"scene": 0.5, "file": 0.2, "restart": 0.15, "api": 0.15}
+    share = {"scene": 0.45, "file": 0.18, "restart": 0.13, "api": 0.13, "outputs": 0.11}
     total = sum(share[k] for k in args.kinds)
     report = {}
     import time

@@ -40,6 +40,7 @@ from pmpm.scene.config import load_scene
 from pmpm.benchmarks.phase_profile import phase_times
 from pmpm.runner import Run
 from pmpm.benchmarks.cpuinfo import cpu_model
+from pmpm.errors import ConfigError
 
 __all__ = ["ranks", "add_arguments", "BackgroundLoad"]
 
@@ -227,6 +228,11 @@ def ranks(args):
     case = os.path.abspath(args.case)
     if not os.path.isfile(case):
         print(f"pmpm: error: bench ranks: --case {args.case}: no such file", file=sys.stderr)
+        return 2
+    try:  # the scene and its variant checked here, once: not a traceback from every child
+        load_scene(case, args.variant or None)
+    except ConfigError as exc:
+        print(f"pmpm: error: bench ranks: {exc}", file=sys.stderr)
         return 2
     child_args = [mode, str(args.steps), case, args.variant]
     loads = {"both": ["none", "busy"], "none": ["none"], "busy": ["busy"]}[args.load]

@@ -17,9 +17,19 @@ __all__ = ["Scheme", "USF", "USL", "MUSL", "make_scheme"]
 
 
 class Scheme:
-    """Base of the schemes; ``advance(solver, dt)`` runs one step's grid and particle phases."""
+    """Base of the schemes; ``advance(solver, dt)`` runs one step's grid and particle phases.
+
+    The solver holds no scene: a scheme with options takes them at construction
+    (``from_config(cfg)``, the scene's ``[solver]`` settings); in ``advance`` it reads the
+    solver's parts (particles, window, materials, ``options``, ``gravity``, ``effect(name)``) and
+    calls its phases, in which the effects' hooks run (docs/architecture.md)."""
 
     name = None
+
+    @classmethod
+    def from_config(cls, cfg):
+        """The scheme with its options from ``cfg`` (the explicit schemes have none)."""
+        return cls()
 
     def advance(self, s, dt):
         raise NotImplementedError
@@ -76,9 +86,11 @@ class MUSL(Scheme):
         s.update_stress()
 
 
-def make_scheme(name):
-    """The scheme registered under ``name`` (``usf``, ``usl``, ``musl``)."""
-    return lookup(Scheme, name)()
+def make_scheme(name, cfg=None):
+    """The scheme registered under ``name`` (``usf``, ``usl``, ``musl``), with its options from
+    ``cfg`` (the scene's ``[solver]`` settings) when given."""
+    cls = lookup(Scheme, name)
+    return cls.from_config(cfg) if cfg is not None else cls()
 
 
 def scheme_names():

@@ -50,6 +50,7 @@ from pmpm.io._parallel import (
 )
 from pmpm.io.validate import check_regular, crashes_reading
 from pmpm.io.validate import check_checkpoint_schema
+from pmpm.io.ownership import check_target
 
 __all__ = ["write_checkpoint", "read_checkpoint", "checkpoint_paths", "latest_checkpoint",
            "lastgood_path"]
@@ -207,16 +208,35 @@ def write_checkpoint(path_base, comm, time, step, fields, attrs, *, n_total=None
     blocks, duplicates = to_id_blocks(comm, fields, specs, bounds)
     check_all(comm, duplicates == 0, f"{duplicates} particle ids appear more than once")
     path = comm.bcast((path or _next_slot(path_base)) if rank == 0 else None)
+    # Written whole under a fresh temporary name (created exclusively: never a user's file or a
+    # link), then renamed into place by rank 0: a checkpoint is there complete with its
+    # ownership record, or not at all, whatever rank is killed when (the old file stays until
+    # the rename).
+    tmp = comm.bcast(_temp_name(path) if rank == 0 else None)
     state = {**attrs, "time": float(time), "step": int(step), "n_total": n_total}
     error = None
     if not gather or rank == 0:
         try:
-            _write_file(path, comm if not gather and size > 1 else None, state, specs, blocks,
+            _write_file(tmp, comm if not gather and size > 1 else None, state, specs, blocks,
                         int(bounds[rank]))
         except (OSError, RuntimeError, ValueError) as exc:  # h5py reports a full disk as any of these
             error = _write_reason(exc)
     reasons = [r for r in comm.allgather(error) if r is not None]
+    if not reasons and rank == 0:
+        try:
+            check_target(path)  # nothing but pmpm's own file is replaced (checked at start too)
+            os.replace(tmp, path)
+        except OSError as exc:
+            error = _write_reason(exc)
+        except Exception as exc:  # noqa: BLE001 - a ForeignFileError at the name; said on every rank
+            error = str(exc)
+    reasons = reasons or [r for r in comm.allgather(error if rank == 0 else None) if r is not None]
     if reasons:
+        if rank == 0:
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
         raise OutputWriteError(path, reasons[0])
     # No rank returns before the file is complete (a caller may read it at once)
     comm.Barrier()
@@ -235,10 +255,19 @@ def _write_reason(exc):
     return getattr(exc, "strerror", None) or type(exc).__name__
 
 
+def _temp_name(path):
+    """A fresh hidden name beside ``path`` for its temporary (the file itself is created
+    exclusively by :func:`_write_file`, mode ``w-``)."""
+    import secrets
+    folder, name = os.path.split(os.fspath(path))
+    return os.path.join(folder, f".{name}.{secrets.token_hex(6)}.pmpm-tmp")
+
+
 def _write_file(path, comm, state, specs, blocks, start):
-    """Create one checkpoint file; ``comm`` is given for the mpio driver, else None."""
+    """Create one checkpoint file; ``comm`` is given for the mpio driver, else None. The file
+    must not exist (mode ``w-``: created exclusively, never through a link)."""
     kwargs = {"driver": "mpio", "comm": comm} if comm is not None else {}
-    with h5py.File(path, "w", **kwargs) as f:
+    with h5py.File(path, "w-", **kwargs) as f:
         f.attrs["complete"] = False
         f.attrs["layout"] = LAYOUT
         for key in ("time", "step", "n_total"):

@@ -62,10 +62,32 @@ def _write_pvd(path, entries):
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
 
 
-def _export_vtu(h5_path, outdir):
-    """Write one VTU per complete frame and the PVD series; return their paths."""
+def _check_vtu_folder(outdir, root):
+    """The export folder through the gate, before anything is written: not a link (nor any
+    folder on the way from ``root``), and, for the default folder (``root`` given), if it exists,
+    a folder pmpm made: empty or holding pmpm's manifest (a user's folder of that name is not
+    written into)."""
+    ownership.check_target(os.path.join(outdir, ownership.MANIFEST), root)
+    if os.path.islink(outdir):
+        raise ownership.ForeignFileError(outdir, "is a symbolic link: pmpm never writes through a link")
+    if os.path.lexists(outdir):
+        if not os.path.isdir(outdir):
+            raise ownership.ForeignFileError(outdir, "exists and is not a folder")
+        # the default <stem>_vtu is pmpm's own folder; a folder the user names with -o is theirs
+        # to share (each file in it is still claimed)
+        made_by_pmpm = os.path.lexists(os.path.join(outdir, ownership.MANIFEST))
+        if root is not None and os.listdir(outdir) and not made_by_pmpm:
+            raise ownership.ForeignFileError(outdir, "exists and is not a folder pmpm made (it holds files "
+                                                     f"but no {ownership.MANIFEST}): move it or give --outdir")
+        ownership.check_manifest(outdir)
+
+
+def _export_vtu(h5_path, outdir, root=None):
+    """Write one VTU per complete frame and the PVD series; return their paths. ``root``: the
+    folder ``outdir`` was made in (the results file's), below which no link is followed."""
     stem = os.path.splitext(os.path.basename(h5_path))[0]
     paths, entries = [], []
+    _check_vtu_folder(outdir, root)
     with h5py.File(h5_path, "r") as f:
         frames = f["frames"]
         if "x" not in frames:  # checked before anything is written
@@ -74,11 +96,11 @@ def _export_vtu(h5_path, outdir):
             if not np.isfinite(time):
                 continue  # cut short by a crash
             name = f"{stem}_{index:05d}.vtu"
-            path = ownership.claim(os.path.join(outdir, name))  # before it is written
+            path = ownership.claim(os.path.join(outdir, name), root)  # before it is written
             _frame_mesh(frames, index).write(path, file_format="vtu")
             paths.append(path)
             entries.append((time, name))
-    pvd = ownership.claim(os.path.join(outdir, f"{stem}.pvd"))
+    pvd = ownership.claim(os.path.join(outdir, f"{stem}.pvd"), root)
     _write_pvd(pvd, entries)
     return paths + [pvd]
 
@@ -115,7 +137,9 @@ def export(h5_path, fmt="vtu", outdir=None):
     # the folders it made, so a failed export leaves nothing behind (pmpm.io.ownership)
     with ownership.writing(scene_stem(h5_path)):
         if fmt == "vtu":
-            paths = _export_vtu(h5_path, os.fspath(outdir) if outdir else f"{stem}_vtu")
+            # the default folder lies in the results file's folder: no link on the way out of it
+            paths = (_export_vtu(h5_path, os.fspath(outdir)) if outdir else
+                     _export_vtu(h5_path, f"{stem}_vtu", root=folder or "."))
         else:
             target_dir = os.fspath(outdir) if outdir else folder
             with h5py.File(h5_path, "r") as f:

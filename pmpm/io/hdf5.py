@@ -173,6 +173,32 @@ def _describe(dset, units, description):
         dset.attrs["description"] = description
 
 
+def _early():
+    """A dataset creation property list that allocates chunks when the dataset is extended
+    (``H5D_ALLOC_TIME_EARLY``), as parallel HDF5 always does. A file written on one rank with
+    serial HDF5's default (incremental allocation) cannot be extended by the mpio driver later:
+    the collective write of the restarted run fails in Open MPI's ``pwritev`` with EINVAL and
+    the ranks hang over a file no longer readable (issue 35, a restart from 1 rank onto 2). So
+    a 1-rank run lays its file out the way an N-rank run does."""
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
+    return dcpl
+
+
+def _all_early(path):
+    """True if every extendible dataset of the HDF5 file ``path`` allocates early (so the mpio
+    driver may extend it); False for a file of an older pmpm written on one rank."""
+    late = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
+            if obj.id.get_create_plist().get_alloc_time() != h5py.h5d.ALLOC_TIME_EARLY:
+                late.append(name)
+    with h5py.File(path, "r") as f:
+        f.visititems(visit)
+    return not late
+
+
 def _leading_count(times, t):
     """Return how many leading entries of ``times`` are finite and ``<= t``."""
     ok = np.isfinite(times)
@@ -258,6 +284,15 @@ class OutputFile:
         exists = comm.bcast(os.path.exists(self.path) if self.rank == 0 else None)
         if append and not exists:
             logger.warning("append=True but %s does not exist: creating it", self.path)
+        if append and exists and self._driver == "mpio":
+            # a file laid out by an older pmpm on one rank cannot be extended in parallel: this
+            # run writes it through rank 0 instead (the same rows; see _early)
+            serial_only = comm.bcast(self._serial_only() if self.rank == 0 else None)
+            if serial_only:
+                logger.info("%s was written with serial chunk allocation: appending through rank 0",
+                            self.path)
+                self.mode, self._meta, self._driver = "gather", self.rank == 0, None
+                self._bounds = owner_bounds(self.n_total, self.size, gather=True)
         if append and exists:
             self._guarded(lambda: self._reopen(attrs, truncate_after))
         else:
@@ -266,6 +301,12 @@ class OutputFile:
         self.n_frames, self.n_history, self.n_energies = comm.bcast(counts)
 
     # ------------------------------------------------------------------ setup
+    def _serial_only(self):
+        try:
+            return not _all_early(self.path)
+        except Exception:  # noqa: BLE001 - unreadable: _reopen says why, on every rank
+            return False
+
     def _resolve_mode(self, mode):
         """Validate ``mode`` and fall back to gather without parallel h5py."""
         if mode not in MODES:
@@ -326,22 +367,22 @@ class OutputFile:
         self._write_root_attrs(attrs)
         f = self.file
         frames = f.create_group("frames")
-        _describe(frames.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,),
+        _describe(frames.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), dcpl=_early(),
                                         fillvalue=np.nan), *schema.meta(schema.FIELDS, "time"))
-        _describe(frames.create_dataset("step", (0,), "i8", maxshape=(None,), chunks=(1024,),
+        _describe(frames.create_dataset("step", (0,), "i8", maxshape=(None,), chunks=(1024,), dcpl=_early(),
                                         fillvalue=-1), *schema.meta(schema.FIELDS, "step"))
         for name, (trailing, dtype) in self.frame_specs.items():
             self._create_frame_dataset(frames, name, trailing, dtype)
         self._write_vertices(f)
         hist = f.create_group("history")
         hist.attrs["columns"] = _strings(self.history_columns)
-        _describe(hist.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,),
+        _describe(hist.create_dataset("time", (0,), "f8", maxshape=(None,), chunks=(1024,), dcpl=_early(),
                                       fillvalue=np.nan), *schema.meta(schema.HISTORY, "time"))
         ncols = len(self.history_columns)
         units = [schema.meta(schema.HISTORY, c)[0] for c in self.history_columns]
         for track in self.tracks:
             dset = hist.create_dataset(track, (0, ncols), "f8", maxshape=(None, ncols),
-                                       chunks=(256, ncols), fillvalue=np.nan)
+                                       chunks=(256, ncols), dcpl=_early(), fillvalue=np.nan)
             dset.attrs["columns"] = _strings(self.history_columns)
             _describe(dset, units, f"time history of the tracked point {track!r}, one row per "
                       "/history/time, columns named by 'columns': " + "; ".join(
@@ -359,7 +400,7 @@ class OutputFile:
         # Every row of a frame is written, so writing fill values first is wasted IO
         dset = frames.create_dataset(
             name, (0, self.n_total) + trailing, dtype,
-            maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + trailing,
+            maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + trailing, dcpl=_early(),
             fillvalue=fill_value(dtype), fill_time="never")
         comps = component_names(name, trailing)
         if comps:
@@ -372,7 +413,7 @@ class OutputFile:
         grp.attrs["kind"] = "series"
         grp.attrs["columns"] = _strings(columns)  # HDF5 lists members by name; this keeps the order
         for column, (units, description) in columns.items():
-            dset = grp.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,),
+            dset = grp.create_dataset(column, (0,), "f8", maxshape=(None,), chunks=(1024,), dcpl=_early(),
                                       fillvalue=np.nan)
             _describe(dset, units, description)
 
@@ -633,7 +674,7 @@ class OutputFile:
             for key, value in (attrs or {}).items():
                 grp.attrs[key] = value
             for name in columns:
-                dset = grp.create_dataset(name, (0,), "f8", maxshape=(None,), chunks=(1024,),
+                dset = grp.create_dataset(name, (0,), "f8", maxshape=(None,), chunks=(1024,), dcpl=_early(),
                                           fillvalue=np.nan)
                 dset.attrs["units"] = units.get(name, "")
         elif self._meta and group not in seen:  # a restart: drop the rows it recomputes

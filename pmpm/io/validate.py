@@ -63,6 +63,25 @@ def crashes_reading(fn, *args):
     return os.WIFSIGNALED(status)
 
 
+def _open_attrs(path):
+    import h5py
+    with h5py.File(path, "r") as f:
+        dict(f.attrs)
+
+
+def safe_to_open_hdf5(path):
+    """True if ``path`` is a regular file (not a link, FIFO or device: lstat, never opened)
+    whose opening and root attributes do not crash libhdf5 (tried in a forked child first).
+    A FIFO in the output folder would otherwise block HDF5's open for ever, and a crafted file
+    kill the run with a segmentation fault (issue 35)."""
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return False
+    except OSError:
+        return False
+    return not crashes_reading(_open_attrs, path)
+
+
 def check_links(f):
     """Refuse (ValueError) soft and external links and virtual datasets of other files
     anywhere below the open h5py File ``f``; never follows a link to do so."""
@@ -97,7 +116,12 @@ def _text(value):
     return value.decode("utf-8", "replace") if isinstance(value, bytes) else value
 
 
-def _integer(attrs, name, where, low=0):
+#: largest step number a checkpoint may carry: exactly representable as a double (the step
+#: is written through JSON too) and far beyond any run's solver.max_estimated_steps
+MAX_STEP = 2 ** 53
+
+
+def _integer(attrs, name, where, low=0, high=None):
     value = attrs.get(name)
     if isinstance(value, np.ndarray) and value.shape == ():
         value = value[()]
@@ -108,6 +132,8 @@ def _integer(attrs, name, where, low=0):
             raise ValueError(f"{where} attribute '{name}' is missing or not an integer")
     if value < low:
         raise ValueError(f"{where} attribute '{name}' is below {low}")
+    if high is not None and value > high:
+        raise ValueError(f"{where} attribute '{name}' is above {high}")
     return int(value)
 
 
@@ -236,7 +262,7 @@ def check_checkpoint_schema(f, layout):
     if not bool(f.attrs.get("complete", False)):
         raise ValueError("cut short (not marked complete)")
     n = _integer(f.attrs, "n_total", "the root")
-    _integer(f.attrs, "step", "the root")
+    step = _integer(f.attrs, "step", "the root", high=MAX_STEP)
     t = f.attrs.get("time")
     if not isinstance(t, (float, int, np.floating, np.integer)) or isinstance(t, (bool, np.bool_)):
         raise ValueError("the root attribute 'time' is missing or not a number")
@@ -247,6 +273,8 @@ def check_checkpoint_schema(f, layout):
         attrs = None
     if not isinstance(attrs, dict):
         raise ValueError("the root attribute 'attrs' is not a JSON table")
+    if attrs.get("step", step) != step:
+        raise ValueError("its step disagrees between the root and 'attrs'")
     if attrs.get("n_total") != n:
         raise ValueError(f"its counts of particle ids disagree (root {n}, attrs {attrs.get('n_total')!r})")
     particles = _group(f, "particles")

@@ -36,7 +36,8 @@ import xml.etree.ElementTree as ET
 
 import h5py
 import numpy as np
-from pmpm.io.ownership import xdmf_marker
+
+from pmpm.io import ownership
 
 __all__ = ["write_xdmf", "write_views", "add_frame_views", "view_specs", "write_document", "sidecar_path",
            "xdmf_number_type", "VIEWS"]
@@ -298,9 +299,9 @@ def write_document(h5_path, xdmf_path, n_total, specs, frames, cache=None):
         parts.append(text)
     parts.append(_TAIL)
     # the marker on the second line tells pmpm this sidecar is its own (pmpm.io.ownership)
-    parts[0] = _HEAD.replace("\n", "\n" + xdmf_marker(os.path.basename(h5_path)) + "\n", 1)
-    tmp = f"{xdmf_path}.tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write("".join(parts))
-    os.replace(tmp, xdmf_path)
+    parts[0] = _HEAD.replace("\n", "\n" + ownership.xdmf_marker(os.path.basename(h5_path)) + "\n", 1)
+    # through the gate: an exclusive, fresh temporary (never a user's `<case>.xdmf.tmp`, never
+    # through a link) renamed over the sidecar, so a killed run leaves the previous one whole
+    text = "".join(parts)
+    ownership.replace_into(xdmf_path, lambda fh: fh.write(text))
     return frames

@@ -21,6 +21,10 @@ __all__ = ["GroundMotion", "read_record"]
 logger = logging.getLogger(__name__)
 
 G = 9.80665
+#: largest scaled ground acceleration (m/s^2): recorded earthquakes stay below about 5 g; 1000 g
+#: is a unit or scale typo, and its velocities would need steps no stable run can take (a record
+#: scaled past 1e300 g overflowed to inf and failed with exit 3 after the run had started)
+MAX_GROUND_ACCELERATION = 1000 * G
 
 
 #: largest record file read (a long record at 0.005 s holds a few MB)
@@ -129,7 +133,13 @@ class GroundMotion(Effect):
         path = config["file"]
         path = path if os.path.isabs(path) else os.path.join(scene_dir, path)
         self.t, a = read_record(path, config["format"])
-        self.a = a * config["scale"]
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.a = a * config["scale"]
+            peak = float(np.max(np.abs(self.a))) if len(self.a) else 0.0
+        if not peak <= MAX_GROUND_ACCELERATION:  # before any step: a typo, not a record
+            raise ConfigError("loads.ground_motion.scale", f"gives a peak ground acceleration of "
+                                                           f"{peak / G:.3g} g, more than "
+                                                           f"{MAX_GROUND_ACCELERATION / G:g} g")
         dt = np.diff(self.t)
         self.v = np.concatenate([[0.0], np.cumsum(0.5 * (self.a[1:] + self.a[:-1]) * dt)])
         self.direction = 0 if config["direction"] == "x" else 1

@@ -1,7 +1,10 @@
 """External loads a scene asks for: gravity and total forces on particle sets.
 
-A force set is the particles whose initial position lies in a box; the set's total force
-(scaled by its time function) is shared among them by mass. Each particle belongs to at most
+A force set is the particles of the bodies the force names (``body``), narrowed to those whose
+initial position lies in its box if it has one; a force that names no body takes every particle
+in its box, whatever body it belongs to (``pmpm case.toml --check`` says when such a box
+catches several bodies: :func:`box_load_report`). The set's total force (scaled by its time
+function) is shared among them by mass. Each particle belongs to at most
 one set, recorded in its ``load_id`` / ``load_w`` fields (they exist only when the scene has
 forces, and migrate with the particle). With no loads the kernels receive ``None`` and compile
 without the code.
@@ -15,12 +18,38 @@ from pmpm.core.effects import Effect
 from pmpm.errors import ConfigError
 from pmpm.physics.timefunctions import evaluate
 
-__all__ = ["Loads"]
+__all__ = ["Loads", "select", "box_load_report"]
 logger = logging.getLogger(__name__)
 
 
 def _in_box(x, lower, upper):
     return np.all((x >= np.asarray(lower)) & (x <= np.asarray(upper)), axis=1)
+
+
+def select(force, x0, body):
+    """Mask of the particles ``force`` acts on: of its bodies (``body_ids``), in its box."""
+    sel = np.ones(len(x0), dtype=bool) if force.lower is None else _in_box(x0, force.lower, force.upper)
+    if force.body_ids:
+        sel &= np.isin(body, np.asarray(force.body_ids, dtype=body.dtype))
+    return sel
+
+
+def box_load_report(forces, x0, body, m, body_names):
+    """Lines for ``--check``: each force that names no body and whose box catches the particles
+    of more than one body (its load is shared among them by mass), with each body's share."""
+    lines = []
+    for k, f in enumerate(forces):
+        if f.body_ids:
+            continue
+        sel = select(f, x0, body)
+        caught = np.unique(body[sel])
+        if len(caught) > 1:
+            mass = np.bincount(body[sel], weights=m[sel], minlength=len(body_names))
+            shares = ", ".join(f"{body_names[b]!r} {mass[b] / mass.sum():.1%}" for b in caught)
+            lines.append(f"warning: loads.forces[{k}] ({f.name!r}): its box catches {len(caught)} bodies, "
+                         f"the load is shared among them by mass ({shares}); "
+                         f"name the body it acts on with body = \"...\"")
+    return lines
 
 
 class Loads(Effect):
@@ -71,13 +100,15 @@ class Loads(Effect):
         load_id = np.full(len(m), -1, dtype=np.int32)
         load_w = np.zeros(len(m))
         for k, f in enumerate(self.forces):
-            sel = _in_box(x0, f.lower, f.upper)
+            sel = select(f, x0, fields["body"])
             if np.any(sel & (load_id >= 0)):
                 other = self.forces[load_id[np.argmax(sel & (load_id >= 0))]].name
-                raise ConfigError(f"loads.forces[{k}]", f"box overlaps force {other!r} (a particle takes one set)")
+                raise ConfigError(f"loads.forces[{k}]", f"overlaps force {other!r}: they select the same "
+                                                        f"particles (a particle takes one set)")
             total = allreduce_sum(float(m[sel].sum()))
             if total <= 0:
-                raise ConfigError(f"loads.forces[{k}]", "box selects no particle")
+                raise ConfigError(f"loads.forces[{k}]", "selects no particle of its bodies" if f.body_ids
+                                  else "box selects no particle")
             load_id[sel] = k
             load_w[sel] = m[sel] / total
         fields["load_id"], fields["load_w"] = load_id, load_w

@@ -177,7 +177,7 @@ class HeldFaces(Effect):
         """Impose the supports on the nodal velocities in window fields ``field``, ``field + 1``
         (1: after the grid update, whose velocity change in fields 3, 4 is corrected with them;
         5: the MUSL re-mapped velocity). ``impulse``: the constraint's impulses are the step's
-        reaction (added to ``solver.reactions`` and the support work to the energy balance)."""
+        reaction (added to the reactions effect's sums and the support work to the energy balance)."""
         w, g = solver.window, self.grid
         G = w.G
         _, ids, sup, nodes, weights = self._local_rows(solver)

@@ -24,6 +24,11 @@ def parse_pushover(t, scene):
     displacement = t.number("displacement")
     if displacement == 0:
         raise ConfigError(t.path("displacement"), "must not be 0")
+    # the control point cannot be pushed further than the grid reaches: a larger target is a
+    # typo, and would drive a step-wise velocity no stable step can follow
+    extent = max(c * scene.grid.cell_size for c in scene.grid.cells)
+    if abs(displacement) > extent:
+        raise ConfigError(t.path("displacement"), f"{displacement:g} m is beyond the grid's extent ({extent:g} m)")
     end = scene.solver.end_time
     duration = t.number("duration", end, low=0.0, low_open=True)
     if duration > end * (1 + 1e-12):

@@ -19,7 +19,8 @@ from pmpm.errors import ConfigError
 from pmpm.files import read_regular
 from pmpm.physics.materials import make_material
 from pmpm.scene.expressions import parse_expression
-from pmpm.scene.limits import check_memory, check_time_step
+from pmpm.scene.limits import (MAX_XPIC_ORDER, check_memory, check_override_depth, check_time_step,
+                               check_work_bounds)
 from pmpm.scene.names import check_name, check_output_directory, check_output_files
 from pmpm.scene.tables import MAX_MAGNITUDE, REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
@@ -67,10 +68,12 @@ class BoundaryConfig:
 @dataclass(frozen=True)
 class ForceConfig:
     name: str
-    lower: tuple
-    upper: tuple
+    lower: Optional[tuple]                 # the box (None: the whole of the named bodies)
+    upper: Optional[tuple]
     force: tuple
     time_function: dict
+    bodies: tuple = ()                     # names of the bodies it acts on (empty: any in the box)
+    body_ids: tuple = ()                   # their indices in Scene.bodies (set by the scene check)
 
 
 @dataclass(frozen=True)
@@ -499,6 +502,29 @@ def _ground_motion(t):
     return gm
 
 
+def _force_bodies(f):
+    """``body``: the name of a body, or a list of names, the force acts on (its particles only)."""
+    value = f.raw("body", None)
+    if value is None:
+        return ()
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
+        raise ConfigError(f.path("body"), "must be a body's name or a non-empty list of names")
+    return tuple(names)
+
+
+def _check_force_bodies(scene):
+    """Every body a force names exists; record their indices (ForceConfig.body_ids)."""
+    names = [b.name for b in scene.bodies]
+    forces = []
+    for k, f in enumerate(scene.loads.forces):
+        for n in f.bodies:
+            if n not in names:
+                raise ConfigError(f"loads.forces[{k}].body", f"no body named {n!r} (defined: {', '.join(names)})")
+        forces.append(dataclasses.replace(f, body_ids=tuple(names.index(n) for n in f.bodies)))
+    return dataclasses.replace(scene, loads=dataclasses.replace(scene.loads, forces=tuple(forces)))
+
+
 def _loads(root):
     t = root.table("loads", None)
     if t is None:
@@ -508,9 +534,15 @@ def _loads(root):
     damping, rayleigh = _damping(t)
     forces = []
     for k, f in enumerate(t.tables("forces")):
+        bodies = _force_bodies(f)
+        # with `body`, the box is optional (it may narrow the body's particles); without, required
+        lower = f.vector("lower", None) if bodies else f.vector("lower")
+        upper = f.vector("upper", None) if bodies else f.vector("upper")
+        if (lower is None) != (upper is None):
+            raise ConfigError(f.path("lower" if lower is None else "upper"), "give both lower and upper, or neither")
         forces.append(ForceConfig(
-            name=f.string("name", f"force{k}"), lower=f.vector("lower"), upper=f.vector("upper"),
-            force=f.vector("force"),
+            name=f.string("name", f"force{k}"), lower=lower, upper=upper,
+            force=f.vector("force"), bodies=bodies,
             time_function=parse_time_function(f.table("time_function", {"type": "step"}))))
         f.finish()
     t.finish()
@@ -569,7 +601,7 @@ def _solver(t):
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
         allow_unstable_time_step=t.boolean("allow_unstable_time_step", False),
         transfer=t.string("transfer", "flip", choices=TRANSFERS),
-        xpic_order=t.integer("xpic_order", 2, low=1))
+        xpic_order=t.integer("xpic_order", 2, low=1, high=MAX_XPIC_ORDER))
     if t.has("xpic_order") and s.transfer != "xpic":
         raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
     if s.transfer == "xpic":
@@ -745,6 +777,7 @@ def parse_scene(data, path="<scene>"):
                   parallel=_parallel(root.table("parallel", None)), variants=variants)
     scene = dataclasses.replace(scene, contact=_contact(root.table("contact", None), scene.bodies),
                                 stop=_stops(root, scene.output.track))
+    scene = _check_force_bodies(scene)
     names = [b.name for b in scene.bodies]
     for k, bc in enumerate(scene.boundaries):
         if bc.body is not None and bc.body not in names:
@@ -760,6 +793,7 @@ def parse_scene(data, path="<scene>"):
         scene = dataclasses.replace(scene, output=dataclasses.replace(scene.output, directory=f"{stem}_results"))
     root.finish()
     _check_velocity_values(scene.bodies, scene.grid)
+    check_work_bounds(scene)  # frames, rows, checkpoints, orders, thicknesses the run can afford
     built = [make_material(materials[k], f"materials.{k}", formulation) for k in materials]
     check_time_step(scene, built)
     # what no rank count can shrink (every rank places all points and holds a window at
@@ -771,6 +805,7 @@ def parse_scene(data, path="<scene>"):
 def apply_overrides(data, overrides, where):
     """Copy of TOML ``data`` with dotted-key ``overrides`` (``"materials.steel.type" = ...``)."""
     import copy
+    check_override_depth(overrides, where)  # before _flatten and deepcopy recurse into it
     data = copy.deepcopy(data)
     for dotted, value in _flatten(overrides):
         node = data

@@ -19,7 +19,7 @@ in docs/scenes.md, "Frames"; in short:
   Ry, M about the node) is recorded under the node's name;
 * a nodal load acts on the particles of the node's panel (column depth by beam depth),
   shared by mass; a member's ``load_per_length`` (N/m, times the node-to-node length) on the
-  particles of its clear length;
+  particles of its clear length, of that member's body only (``body = "<member>"``);
 * two section cuts per member, named ``<member>_<node>``, at ``cut_offset`` from each clear
   end; a tracked point per node, named after it;
 * a nodal mass is added to the joint panel of the column under the node, split off as its own
@@ -316,8 +316,10 @@ def _member_loads(members, geo, nodes, tol):
         c0, c1 = g["clear"]
         if m.vertical:
             y0, y1 = c0, c1
-        # strictly inside the clear part: the panels' particles belong to the nodal loads
-        out.append({"name": f"{m.name}_line_load", "lower": [x0 + tol, y0 + tol], "upper": [x1 - tol, y1 - tol],
+        # its member's particles only (`body`: never a neighbour the box touches), strictly
+        # inside the clear part: the panels' particles belong to the nodal loads
+        out.append({"name": f"{m.name}_line_load", "body": m.name,
+                    "lower": [x0 + tol, y0 + tol], "upper": [x1 - tol, y1 - tol],
                     "force": [m.load[0] * length, m.load[1] * length], "time_function": m.load_tf})
     return out
 
@@ -426,6 +428,7 @@ def expand_frame(data):
     """
     if "frame" not in data:
         return data
+    _check_lists_of_tables(data)  # before any of them is iterated or merged with the frame's
     grid, t, materials = _read(data)
     tol = 1e-6 * grid.cell_size
     default_material = t.string("material", None)
@@ -465,6 +468,27 @@ def expand_frame(data):
     output["track"] = tracks + list(output.get("track", []))
     _check_names(out, "frame")
     return out
+
+
+#: the scene's own lists the frame's generated entries are put in front of
+MERGED_LISTS = ("bodies", "boundary", "loads.forces", "output.section", "output.track")
+
+
+def _check_lists_of_tables(data):
+    """Each of :data:`MERGED_LISTS` the scene gives must be a list of tables (``[[bodies]]``):
+    a number, a boolean, a string or a list holding one is refused naming the entry."""
+    for key in MERGED_LISTS:
+        node = data
+        for part in key.split(".")[:-1]:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or key.split(".")[-1] not in node:
+            continue
+        value = node[key.split(".")[-1]]
+        if not isinstance(value, list):
+            raise ConfigError(key, f"must be a list of tables ([[{key}]]), not {type(value).__name__}")
+        for k, item in enumerate(value):
+            if not isinstance(item, dict):
+                raise ConfigError(f"{key}[{k}]", f"must be a table ([[{key}]]), not {type(item).__name__}")
 
 
 def frame_report(data):

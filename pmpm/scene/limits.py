@@ -19,7 +19,87 @@ import os
 from pmpm.errors import ConfigError
 
 __all__ = ["estimate_particles", "estimate_bytes", "available_bytes", "check_memory",
-           "check_time_step", "BYTES_PER_NODE", "BYTES_PER_PARTICLE", "BYTES_PER_PLACED_POINT"]
+           "check_time_step", "check_work_bounds", "check_override_depth", "BYTES_PER_NODE",
+           "BYTES_PER_PARTICLE", "BYTES_PER_PLACED_POINT", "MAX_FRAMES", "MAX_HISTORY_ROWS",
+           "MAX_CHECKPOINTS", "MAX_XPIC_ORDER", "THICKNESS_RANGE", "MAX_OVERRIDE_DEPTH"]
+
+# -- bounds on the numbers that size a run's work (issue 35, deliverable 5) ---------------------
+
+#: frames a run may write: each frame holds every particle's output fields (a 50,000-particle
+#: scene's frame of x, v, stress, strain is 4 MB), so 1e5 frames is already 400 GB; a larger
+#: count comes from a mistyped interval, not from a run anyone can store
+MAX_FRAMES = 100_000
+#: history rows (tracked points, energies, section cuts: a few hundred bytes a row with every
+#: table): 1e7 rows is gigabytes and more rows than any run's steps at the default step bound
+MAX_HISTORY_ROWS = 10_000_000
+#: checkpoints: each rewrites the whole particle state (two files alternate, so the disk holds
+#: two), and the writing time is a full frame's; 1e5 is already hours of writing at 0.1 s each
+MAX_CHECKPOINTS = 100_000
+#: XPIC(m) costs m - 1 grid-particle-grid passes and halo rounds per step (docs/effects.md): at
+#: 16 the step already costs several times FLIP's; Hammerquist & Nairn (2017) use m <= 5 and
+#: report the filtered modes converged by then, so a larger m buys nothing but time
+MAX_XPIC_ORDER = 16
+#: out-of-plane thickness (m): mass, volume and every force scale with it, and the energies with
+#: its square through the velocities it sets; outside 1 nm to 1000 km they under- or overflow in
+#: double precision (1e308 made the first step's energies infinite; 5e-324 made masses 0)
+THICKNESS_RANGE = (1e-9, 1e6)
+#: nesting of an override dict (a scene's dotted keys are a few levels deep); deeper nesting is
+#: refused before any recursion (Python's limit is 1000 frames)
+MAX_OVERRIDE_DEPTH = 64
+#: smallest end time: its default output intervals (end_time / 20, / 1000) stay normal doubles
+MIN_END_TIME = 1000 * 2.2250738585072014e-308
+
+
+def _finite_positive(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+
+
+def check_work_bounds(scene):
+    """Refuse, naming the key, a number that sizes the run's work beyond what it can afford:
+    end time (nan, inf, subnormal), output frames, history rows and checkpoints to the end
+    time, XPIC's order, thicknesses. Applied to every scene, also a Scene built in Python and
+    handed to :func:`pmpm.run` (its fields never passed the TOML parser)."""
+    end = scene.solver.end_time
+    if not _finite_positive(end) or end < MIN_END_TIME:
+        raise ConfigError("solver.end_time", f"must be a finite number >= {MIN_END_TIME:.3g} s (got {end!r})")
+    out = scene.output
+    for key, interval, cap, what in (("output.interval", out.interval, MAX_FRAMES, "frames"),
+                                     ("output.history_interval", out.history_interval, MAX_HISTORY_ROWS,
+                                      "history rows"),
+                                     ("output.checkpoint_interval", out.checkpoint_interval, MAX_CHECKPOINTS,
+                                      "checkpoints")):
+        if interval is None and key == "output.checkpoint_interval":
+            continue
+        if not _finite_positive(interval):
+            raise ConfigError(key, f"must be a positive finite number (got {interval!r})")
+        count = end / interval
+        if not count <= cap:
+            raise ConfigError(key, f"{interval:.3g} s gives {count:.3g} {what} to solver.end_time = {end:.3g} s, "
+                                   f"more than {cap:,} (a run cannot store them)")
+    order = getattr(scene.solver, "xpic_order", 2)
+    if not isinstance(order, int) or isinstance(order, bool) or not 1 <= order <= MAX_XPIC_ORDER:
+        raise ConfigError("solver.xpic_order", f"must be an integer from 1 to {MAX_XPIC_ORDER} "
+                                               f"(each order is a grid pass per step; got {order!r})")
+    lo, hi = THICKNESS_RANGE
+    things = [("thickness", scene.thickness)] + [(f"bodies[{k}].thickness", b.thickness)
+                                                 for k, b in enumerate(scene.bodies)]
+    for key, value in things:
+        if not _finite_positive(value) or not lo <= value <= hi:
+            raise ConfigError(key, f"must be from {lo:g} to {hi:g} m (got {value!r})")
+
+
+def check_override_depth(overrides, where, depth=0):
+    """Refuse an overrides dict nested deeper than :data:`MAX_OVERRIDE_DEPTH` (iteratively, so
+    5000 levels are one line, not a RecursionError)."""
+    stack = [(overrides, 0)]
+    while stack:
+        node, level = stack.pop()
+        if level > MAX_OVERRIDE_DEPTH:
+            raise ConfigError(where, f"nested more than {MAX_OVERRIDE_DEPTH} tables deep")
+        if isinstance(node, dict):
+            stack.extend((v, level + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, level + 1) for v in node)
 
 #: window arrays per node: G (7 float64 fields), bc_mask (2 int8), bc_vel (2 float64), plus the
 #: kernels' per-node scratch (a second copy of G in the halo exchange)

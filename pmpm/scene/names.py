@@ -111,6 +111,8 @@ def run_files(scene):
         files.append((key, f"{run}_{plot}.png"))
     if scene.output.deformed_plot:
         files.append(("output.deformed_plot", deformed_png(run)))
+    if getattr(scene, "pushover", None) is not None:  # its capacity curve (pmpm.results.capacity)
+        files += [("pushover", f"{run}_capacity.csv"), ("pushover", f"{run}_capacity.png")]
     return files
 
 

@@ -12,9 +12,12 @@ import numpy as np
 from decomposition import SlabDecomposition, balanced_bounds, max_ranks
 from pmpm.scene.bodies import check_overlaps, generate_body
 from pmpm.errors import ConfigError
+from pmpm.core.grid import Grid
 from pmpm.core.particles import CORE_FIELDS, OPTIONAL_FIELDS, Particles
+from pmpm.physics.loads import box_load_report
+from pmpm.physics.materials import make_material
 
-__all__ = ["place_points", "create_particles", "choose_axis", "make_decomposition"]
+__all__ = ["place_points", "create_particles", "choose_axis", "make_decomposition", "load_box_report"]
 logger = logging.getLogger(__name__)
 
 
@@ -32,6 +35,19 @@ def place_points(scene, grid, materials, labels):
         parts.append(pts)
     check_overlaps(scene.bodies, [p["x"] for p in parts], grid.h)
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+
+
+def load_box_report(scene):
+    """``--check`` lines for the forces whose box (naming no body) catches several bodies: the
+    scene's points are placed as a run places them (pmpm.physics.loads.box_load_report)."""
+    if not any(not f.body_ids for f in scene.loads.forces):
+        return []
+    grid = Grid(scene.grid.origin, scene.grid.cell_size, scene.grid.cells)
+    labels = list(scene.materials)
+    materials = [make_material(scene.materials[k], f"materials.{k}", scene.formulation) for k in labels]
+    points = place_points(scene, grid, materials, labels)
+    return box_load_report(scene.loads.forces, points["x"], points["body"], points["m"],
+                           [b.name for b in scene.bodies])
 
 
 def create_particles(points, keep, materials, optional=()):

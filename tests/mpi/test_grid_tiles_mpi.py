@@ -48,8 +48,8 @@ def test_tiles_on_slabs_equal_the_whole_window_to_the_bit(parallel):
     if ok:
         a, b = np.argsort(tiled.particles["id"]), np.argsort(whole.particles["id"])
         ok = all(np.array_equal(tiled.particles[k][a], whole.particles[k][b]) for k in whole.particles.fields)
-        ok = ok and np.array_equal(tiled.reactions.kernel_arg()[1], whole.reactions.kernel_arg()[1])
+        ok = ok and np.array_equal(tiled.effect("reactions").kernel_arg()[1], whole.effect("reactions").kernel_arg()[1])
     ok = ok and tiled.energies() == whole.energies()
     assert comm.allreduce(bool(ok), op=MPI.LAND)
     # the block moved across the slab boundary and hit the wall
-    assert comm.allreduce(abs(whole.reactions.kernel_arg()[1]).max(), op=MPI.MAX) > 0
+    assert comm.allreduce(abs(whole.effect("reactions").kernel_arg()[1]).max(), op=MPI.MAX) > 0

@@ -171,8 +171,8 @@ def test_a_run_with_tiles_equals_the_whole_window_to_the_bit(shape, scheme, inte
     for name in whole.particles.fields:
         np.testing.assert_array_equal(tiled.particles[name], whole.particles[name], err_msg=name)
     assert tiled.energies() == whole.energies()
-    np.testing.assert_array_equal(tiled.reactions.kernel_arg()[1], whole.reactions.kernel_arg()[1])
-    assert np.abs(whole.reactions.kernel_arg()[1]).max() > 0  # the block reached the wall
+    np.testing.assert_array_equal(tiled.effect("reactions").kernel_arg()[1], whole.effect("reactions").kernel_arg()[1])
+    assert np.abs(whole.effect("reactions").kernel_arg()[1]).max() > 0  # the block reached the wall
 
 
 def test_tiles_are_chosen_for_sparse_windows_only():
@@ -189,5 +189,6 @@ def test_tiles_are_chosen_for_sparse_windows_only():
     assert dense.window.tile == 0 and dense.window.tiles is None
     assert sparse.window.tile == TILE and sparse.window.tiles is not None
     # CPDI's corners are not bounded by the ghost width on one rank: never tiles
-    cpdi = dataclasses.replace(sparse.scene, solver=dataclasses.replace(sparse.scene.solver, interpolation="cpdi"))
+    sparse_scene = dataclasses.replace(scene, grid=dataclasses.replace(scene.grid, cells=[32, 20]))
+    cpdi = dataclasses.replace(sparse_scene, solver=dataclasses.replace(sparse_scene.solver, interpolation="cpdi"))
     assert build_solver(cpdi, MPI.COMM_SELF).window.tiles is None

@@ -65,18 +65,19 @@ def test_expansion_gives_the_hand_written_supports_and_time_step(solvers):
     assert np.array_equal(ma[heavy], mb[heavy])
     assert int(ma[heavy].sum()) >= 2 * 2 * 7  # both bases: at least the column's width of nodes
     assert np.all(ma <= mb)
-    assert [bc.name for bc in fa.scene.boundaries] == [bc.name for bc in fb.scene.boundaries]
-    assert [(bc.moment_about, bc.reaction) for bc in fa.scene.boundaries] == \
+    assert [bc.name for bc in fa.effect("boundary").boundaries] == [bc.name for bc in fb.effect("boundary").boundaries]
+    assert [(bc.moment_about, bc.reaction) for bc in fa.effect("boundary").boundaries] == \
            [((0.0, 0.0), True), ((6.096, 0.0), True)]
 
 
 def test_expansion_gives_the_hand_written_cuts_and_tracks(solvers):
     """Same cut positions on the same bodies (names derived from member and node names)."""
-    ca = [(s.body, round(s.position, 9)) for s in solvers["frame"].scene.output.sections]
-    cb = [(s.body.replace(" ", "_"), round(s.position, 9)) for s in solvers["hand"].scene.output.sections]
+    fa, fb = (frame_runs.frame_scene("elastic", scene=path) for path in (FRAME, HANDWRITTEN))
+    ca = [(s.body, round(s.position, 9)) for s in fa.output.sections]
+    cb = [(s.body.replace(" ", "_"), round(s.position, 9)) for s in fb.output.sections]
     assert sorted(ca) == sorted(cb)
-    tracks = {t.name: t.point for t in solvers["frame"].scene.output.track}
-    for t in solvers["hand"].scene.output.track:
+    tracks = {t.name: t.point for t in fa.output.track}
+    for t in fb.output.track:
         assert tracks[t.name] == t.point
 
 
