@@ -135,3 +135,42 @@ def test_damage_is_written_and_the_first_fracture_is_in_the_summary(tmp_path, mo
         assert damage.max() == 1.0 and damage.min() >= 0.0
     xdmf = [p for p in os.listdir("out") if p.endswith(".xdmf")]
     assert xdmf and 'Name="damage"' in open(os.path.join("out", xdmf[0])).read()
+
+
+# planted bug: the checkpoint reader handing back the transmitted stress as the effective
+# stress (pmpm/io/checkpoint.py) -> 3.144 J against 3.063 J: fails
+def test_a_restart_through_the_release_continues_the_same_run(tmp_path, monkeypatch):
+    """The bar run until its band has released half its fracture energy, then restarted from
+    that checkpoint to 8e-4 s, ends where the uninterrupted run ends: the damage,
+    crack and effective-stress fields travel in the checkpoint. (The first fracture's time does
+    not yet: a restart reports the bodies that had failed at the restart's time.)"""
+    import contextlib
+    import io
+
+    from pmpm.api import load_results
+    from pmpm.cli import main
+    monkeypatch.chdir(tmp_path)
+    sc = bar_scene(10)
+    sc["output"].update(fields=["x", "damage"], interval=4e-4, checkpoint_interval=1e-4)
+    (tmp_path / "bar.toml").write_text(_toml(sc))
+    whole = run("bar.toml", dataframes=False)
+    # stop halfway through the release (the checkpoint at the run's end)
+    fw, t = np.asarray(whole.energies["fracture_work"]), np.asarray(whole.energies["time"])
+    t_half = float(t[np.nonzero(fw > 0.5 * fw[-1])[0][0]])
+    sc["solver"]["end_time"] = t_half
+    (tmp_path / "bar.toml").write_text(_toml(sc))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+        assert main(["bar.toml", "--no-plots"]) == 0, out.getvalue()
+        part = load_results("bar_results/bar.h5", dataframes=False)
+        crack = part.frames["damage"][-1]
+        sc["solver"]["end_time"] = 8e-4
+        (tmp_path / "bar.toml").write_text(_toml(sc))
+        assert main(["bar.toml", "--restart", "bar_results/bar.h5", "--no-plots"]) == 0, out.getvalue()
+    assert crack.max() == 1.0   # the restart starts from a failed band
+    # the release was not over at the restart: energy still to dissipate
+    assert float(part.energies["fracture_work"][-1]) < 0.9 * fw[-1]
+    again = load_results("bar_results/bar.h5", dataframes=False)
+    assert float(again.energies["time"][-1]) == pytest.approx(8e-4)
+    assert float(again.energies["fracture_work"][-1]) == pytest.approx(
+        float(whole.energies["fracture_work"][-1]), rel=1e-12)
