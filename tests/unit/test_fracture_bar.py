@@ -1,8 +1,8 @@
 """A bar pulled apart through a weak band: the dissipated fracture energy does not depend on the
 cell size (the crack band regularisation of pmpm.physics.materials.fracture).
 
-A steel bar (plane stress, linear shape functions, so the strain of a cell is uniform and a
-crack localises in one cell) is held at its left end and pulled at its right end. One cell
+A steel bar (plane stress; linear shape functions, whose strain is uniform in a cell, and the
+default cubic B-splines) is held at its left end and pulled at its right end. One cell
 column in the middle is a weaker steel (lower yield stress, no hardening, a small fracture
 strain): it alone yields, fails and releases its tension while the rest stays elastic. The
 failed band is one cell wide at both resolutions and the crack band length is the cell size,
@@ -80,17 +80,20 @@ def _toml(table, prefix=""):
     return "\n".join(lines) + "\n"
 
 
-def _run(n, length=None):
-    r = run(bar_scene(n, length), dataframes=False)
+def _run(n, length=None, shape="linear"):
+    sc = bar_scene(n, length)
+    sc["solver"]["shape_function"] = shape
+    r = run(sc, dataframes=False)
     failed = r.frames["damage"][-1] >= 1.0
     x0 = r.frames["x"][0][:, 0]
     return r, failed, x0
 
 
+@pytest.mark.parametrize("shape", ["linear", "cubic"])
 @pytest.mark.parametrize("n", [10, 20])
-def test_bar_fracture_energy_is_gf_times_area_at_two_resolutions(n):
+def test_bar_fracture_energy_is_gf_times_area_at_two_resolutions(n, shape):
     h = L / n
-    r, failed, x0 = _run(n)
+    r, failed, x0 = _run(n, shape=shape)
     # the crack is the weak band, all of it and nothing else
     in_band = (x0 > L / 2) & (x0 < L / 2 + h)
     assert np.array_equal(failed, in_band)
