@@ -123,6 +123,8 @@ def build_solver(scene, comm=None):
     cfg = scene.solver
     grid = _grid(scene)
     materials = _materials(scene, comm)
+    for material in materials:   # a length tied to the cell (the fracture's crack band)
+        material.use_cell_size(grid.h)
     scheme = make_scheme(cfg.scheme, cfg)
     transfer = make_transfer(cfg.transfer, cfg)
     reach = ghost_width(cfg.shape_function, cfg.interpolation)

@@ -630,6 +630,8 @@ class Run:
                    "removed": s.removed, "output": self.path if self.write else None,
                    "end_reason": end_reason, "stopped": self.stopped,
                    "external_work": e["external_work"], "numerical_loss": e["numerical_loss"]}
+        for effect in s.effects:   # the effects' own entries (first fracture, ...): collective
+            summary.update(effect.summary(s))
         if self.rank == 0:
             logger.info("energy: %s", energy_summary(e))
         if s.removed and self.rank == 0:  # a global count

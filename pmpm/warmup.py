@@ -28,6 +28,7 @@ def warm_kernels(verbose=False):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     for case, variant in (("portal_frame.toml", "elastoplastic"),
                           ("disks_contact.toml", None),   # multi-field contact
+                          ("fracture_notched_plate.toml", None),   # the ductile fracture passes
                           # CPDI (cubic) with neo_hookean and with Green-Naghdi
                           ("hard/cantilever_large_rotation.toml", "neo_hookean_h0.25"),
                           ("hard/cantilever_large_rotation.toml", "linear_elastic_h0.25")):

@@ -175,6 +175,10 @@ def _effect_scenes(n, record):
         "large rotations (Green-Naghdi)": block_scene(n, extra_solver={"objective_rate": "green_naghdi"}),
         "deformation gradient kept": block_scene(n, track_F=True),
         "plasticity (smooth_vonmises)": block_scene(n, material="smooth_vonmises"),
+        "plasticity (bilinear_vonmises)": block_scene(n, material="bilinear_vonmises"),
+        # the damage update on every yielding point (none fails): the fracture option's own cost
+        "fracture (bilinear_vonmises)": block_scene(n, material="bilinear_vonmises", fracture=True),
+        "fracture (smooth_vonmises)": block_scene(n, material="smooth_vonmises", fracture=True),
         "hyperelasticity (neo_hookean)": block_scene(n, material="neo_hookean"),
     }
 

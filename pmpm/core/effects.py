@@ -32,7 +32,8 @@ What an effect gives the step, in the order of a step (docs/architecture.md draw
   ``restore(s, attrs)`` after a restart;
 * ``add_fields(particles, setup)``: per-particle fields the effect keeps (they migrate and are
   checkpointed like any field);
-* ``describe()``: lines of the run header's ``effect on:`` list.
+* ``describe()``: lines of the run header's ``effect on:`` list;
+* ``summary(s)``: entries of the run summary at the end (the first fracture of each body).
 
 A material can contribute energy terms too (:data:`ENERGY_TERMS`, ``register_energy``): a
 damage model's dissipated energy is one more column without a change here.
@@ -153,6 +154,10 @@ class Effect:
 
     def describe(self):
         return []
+
+    def summary(self, s):
+        """Entries of the run summary (collective: every rank calls it once, at the end)."""
+        return {}
 
 
 #: the hooks the solver calls through ``EffectList.hooks`` (only on effects overriding them)

@@ -47,7 +47,9 @@ __all__ = ["plot_results", "plot_deformed", "energy_balance_error", "energy_figu
 
 logger = logging.getLogger(__name__)
 
-STORED = ("kinetic", "strain_energy", "plastic_work", "damping_work")
+#: energy the body holds or dissipated inside the internal work (the registered terms done
+#: inside it: plastic work, fracture work, ...), and the damping work
+STORED = ("kinetic", "strain_energy", *[t.name for t in energy_terms() if not t.outside], "damping_work")
 #: energy that left the body: dissipated by damping or carried out by removed particles (the
 #: registered energy terms done outside the internal work, pmpm.core.effects)
 LEFT = tuple(t.name for t in energy_terms() if t.outside)

@@ -37,6 +37,13 @@ FIELDS = {
     "eps_p": ("1", "plastic strain epxx, epyy, gpxy (gpxy engineering: 2 epxy)"),
     "eps_p_eq": ("1", "equivalent plastic strain (sum of the plastic multiplier increments)"),
     "plastic_work": ("J/m^3", "plastic work per unit volume"),
+    "damage": ("1", "ductile damage D = sum d(eps_p_eq) / eps_f(triaxiality); 1: the point has "
+                    "failed (docs/fracture.md)"),
+    "fracture_work": ("J/m^3", "energy a failed point dissipated since its failure, per unit volume"),
+    "crack_strain": ("1", "kappa (equivalent plastic strain since failure) and kappa_u (where the "
+                          "tension is fully released) of a failed point"),
+    "effective_stress": ("Pa", "the failed point's undamaged stress sxx, syy, sxy, szz; it transmits "
+                               "the compressive part and (1 - kappa/kappa_u) of the tensile part"),
     "mat": ("1", "index of the particle's material in the scene (-1: particle removed)"),
     "body": ("1", "index of the body the particle was created in (-1: particle removed)"),
 }

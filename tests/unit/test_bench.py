@@ -52,7 +52,8 @@ def test_effects_prints_every_effect():
                                        "ground motion",
                                        "large rotations", "large rotations (Green-Naghdi)",
                                        "deformation gradient kept", "plasticity (smooth_vonmises)",
-                                       "hyperelasticity (neo_hookean)"}
+                                       "plasticity (bilinear_vonmises)", "fracture (bilinear_vonmises)",
+                                       "fracture (smooth_vonmises)", "hyperelasticity (neo_hookean)"}
     # the figures: each overhead is the effect's time over the bare block's, less one, as printed
     effects = summary["effects"]
     base = effects["none"]["ns_per_particle_step"]
@@ -86,8 +87,14 @@ def test_each_effect_scene_differs_from_the_bare_block_by_its_effect_only(tmp_pa
               "deformation gradient kept": ["output.fields"]}
     for name, keys in expect.items():
         assert all(any(c.startswith(k) for k in keys) for c in changed[name]) and changed[name], (name, changed[name])
-    for name in ("plasticity (smooth_vonmises)", "hyperelasticity (neo_hookean)"):
+    for name in ("plasticity (smooth_vonmises)", "plasticity (bilinear_vonmises)", "hyperelasticity (neo_hookean)"):
         assert changed[name] and all(c.startswith("materials.") for c in changed[name]), (name, changed[name])
+    # the fracture variants differ from their plasticity variant by the fracture table only
+    for kind in ("bilinear_vonmises", "smooth_vonmises"):
+        plastic = flat(scenes[f"plasticity ({kind})"])
+        frac = flat(scenes[f"fracture ({kind})"])
+        diff = sorted(k for k in set(plastic) | set(frac) if plastic.get(k) != frac.get(k))
+        assert diff and all(k.startswith("materials.m.fracture.") for k in diff), (kind, diff)
 
 
 @pytest.mark.parametrize("material", ["smooth_vonmises", "bilinear_vonmises"])

@@ -19,6 +19,9 @@ from pmpm.errors import ConfigError
 #: integrated over the volume, a part of the internal work
 PLASTIC_WORK = register_energy("plastic_work", "plastic work, dissipated", outside=False)
 
+# after plastic_work: the fracture option registers its fracture_work, the next energy column
+from pmpm.physics.materials import fracture as fracture_option  # noqa: E402
+
 __all__ = ["Material", "KinematicHardening", "Params", "FORMULATIONS"]
 logger = logging.getLogger(__name__)
 
@@ -59,6 +62,11 @@ class Params:
             rel = "<" if high_open else "<="
             raise ConfigError(f"{self._key}.{name}", f"must be {rel} {high:g} (got {value:g})")
         return value
+
+    def table(self, name):
+        """A sub-table (a dict) or None when absent; checking it is the caller's job."""
+        self._used.add(name)
+        return self._table.get(name)
 
     def finish(self):
         """Refuse keys the material does not know (typos must not pass silently)."""
@@ -108,6 +116,13 @@ class Material:
 
     def read_params(self, p):
         """Read the model's own parameters from ``p`` (a :class:`Params`)."""
+        if p.table("fracture") is not None:
+            raise ConfigError(f"{self.key}.fracture", f"{self.name!r} cannot fracture (ductile fracture "
+                              f"is an option of the plastic steel models: smooth_vonmises, bilinear_vonmises)")
+
+    def use_cell_size(self, h):
+        """Told the grid's cell size ``h`` once the run's grid is known (pmpm.build): a model
+        with a length scale tied to the cell (the fracture's crack band) reads it here."""
 
     # -- elasticity shared by every model ---------------------------------------------------
     @property
@@ -177,3 +192,51 @@ class KinematicHardening(Material):
         self.yield_stress = p.number("yield_stress", low=0.0, low_open=True)
         # required: a silent default of 0 (perfect plasticity) would change results without notice
         self.hardening = p.number("hardening", low=0.0, high=1.0, high_open=True)
+        self.read_fracture(p)
+
+    # -- the ductile fracture option (pmpm.physics.materials.fracture) -----------------------
+    #: the scene's fracture settings (None: the material cannot fracture in this run)
+    fracture = None
+    #: crack band width l_c: the scene's ``length``, else the grid's cell size (use_cell_size)
+    fracture_length = None
+
+    def read_fracture(self, p):
+        """Read ``[<key>.fracture]`` if present: then the material keeps the fracture fields."""
+        table = p.table("fracture")
+        if table is None:
+            return
+        self.fracture = fracture_option.read_fracture(table, f"{self.key}.fracture")
+        self.fracture_length = self.fracture["length"]
+        self.state_fields = {**type(self).state_fields, **fracture_option.FRACTURE_FIELDS}
+        self.tensor_state_fields = (*type(self).tensor_state_fields, "effective_stress")
+
+    def use_cell_size(self, h):
+        if self.fracture is not None and self.fracture["length"] is None:
+            self.fracture_length = float(h)
+
+    def update_stress(self, stress, de, state, mat_ids, which):
+        """The material's plain kernel (:meth:`plastic_update`), between the fracture option's
+        two passes when the scene names it (pmpm.physics.materials.fracture)."""
+        if self.fracture is None:
+            self.plastic_update(stress, de, state, mat_ids, which)
+            return
+        fp, damage, fwork, crack, eff = self.fracture_arguments(state)
+        eq, work = state["eps_p_eq"], state["plastic_work"]
+        ids, phase, old, eq0, work0 = fracture_option.prelude(stress, de, eq, work, mat_ids, which,
+                                                              self.plane_strain, fp, damage, crack, eff)
+        self.plastic_update(stress, de, state, ids, 0)
+        fracture_option.epilogue(phase, old, eq0, work0, stress, de, eq, work, eff, crack, damage, fwork, fp)
+
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """The plastic model's own stress update (its numba kernel): see :meth:`update_stress`."""
+        raise NotImplementedError
+
+    def fracture_arguments(self, state):
+        """The fracture passes' arguments: (parameters, damage, fracture_work, crack_strain,
+        effective_stress), all None without fracture."""
+        if self.fracture is None:
+            return None, None, None, None, None
+        if self.fracture_length is None:
+            raise RuntimeError(f"{self.key}: fracture needs the cell size (use_cell_size) or a length")
+        fp = fracture_option.kernel_params(self.fracture, self.E, self.nu, self.fracture_length)
+        return (fp, state["damage"], state["fracture_work"], state["crack_strain"], state["effective_stress"])

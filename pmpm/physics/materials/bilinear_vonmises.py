@@ -171,8 +171,9 @@ class BilinearVonMises(KinematicHardening):
         return (f"{self.name} (E={self.E:g}, nu={self.nu:g}, density={self.density:g}, "
                 f"yield_stress={self.yield_stress:g}, hardening={self.hardening:g}; {self.formulation})")
 
-    def update_stress(self, stress, de, state, mat_ids, which):
-        """Advance ``stress`` and the plastic state in place by the strain increments ``de``.
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """Advance ``stress`` and the plastic state in place by the strain increments ``de``
+        (the plain kernel; :meth:`KinematicHardening.update_stress` adds the fracture option).
 
         Parameters
         ----------

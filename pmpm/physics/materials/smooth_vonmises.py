@@ -456,8 +456,9 @@ class SmoothVonMises(KinematicHardening):
                 f"yield_stress={self.yield_stress:g}, hardening={self.hardening:g}, "
                 f"smoothness={self.smoothness:g}; {self.formulation})")
 
-    def update_stress(self, stress, de, state, mat_ids, which):
-        """Advance ``stress`` and the plastic state in place by the strain increments ``de``.
+    def plastic_update(self, stress, de, state, mat_ids, which):
+        """Advance ``stress`` and the plastic state in place by the strain increments ``de``
+        (the plain kernel; :meth:`KinematicHardening.update_stress` adds the fracture option).
 
         Parameters
         ----------
