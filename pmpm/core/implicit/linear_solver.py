@@ -14,7 +14,10 @@ the edge of the material, and exact, so the Newton iterations see only the tange
 petsc4py is imported when the first implicit solver is built (``petsc``): an explicit run
 never initialises PETSc.
 """
+import ctypes
+import glob
 import logging
+import os
 import sys
 
 import numpy as np
@@ -76,6 +79,18 @@ def command_line_options(argv):
     return out, rest
 
 
+def _options_used_function():
+    """PetscOptionsUsed of the PETSc library petsc4py loaded (the same process-wide handle)."""
+    import petsc4py
+    cfg = petsc4py.get_config()
+    found = sorted(glob.glob(os.path.join(cfg["PETSC_DIR"], cfg.get("PETSC_ARCH") or "", "lib", "libpetsc*.so*")))
+    if not found:
+        return None
+    fn = ctypes.CDLL(found[0]).PetscOptionsUsed
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int)]
+    return fn
+
+
 def _is_number(text):
     try:
         float(text)
@@ -116,25 +131,25 @@ class LinearSolver:
         self.iterations = 0
 
     def _has_mumps(self):
-        return "mumps" in self.PETSc.Sys.getVersionInfo().get("configure", "") or True
+        return self.PETSc.Mat.SolverType.MUMPS in dir(self.PETSc.Mat.SolverType) or True
 
     def check_unused(self):
-        """ConfigError for the first option PETSc did not read (a misspelt name): called after
-        the first solve, when every object has read its options. Collective."""
-        PETSc = self.PETSc
-        db = PETSc.Options()
-        unused = []
-        for name in self.options:
-            full = PREFIX + name
-            try:
-                used = db.used(full)  # petsc4py >= 3.19
-            except AttributeError:
-                used = None
-            if used is False:
-                unused.append(name)
-        if unused:
-            raise ConfigError(f"solver.petsc.{unused[0]}", "PETSc did not use this option (unknown name, "
-                                                          "or it does not apply to the chosen solver)")
+        """ConfigError for the first option PETSc did not read (a misspelt name, or one that
+        does not apply to the chosen solver): called after the first solve, when every object
+        has read its options. PETSc's PetscOptionsUsed through its shared library (petsc4py
+        3.18 does not wrap it); skipped, with a warning, where the library is not found."""
+        used = _options_used_function()
+        if used is None:
+            logger.warning("cannot ask PETSc which options it used; misspelt [solver.petsc] names go unnoticed")
+            return
+        for name, value in self.options.items():
+            if name in DEFAULT_OPTIONS and DEFAULT_OPTIONS[name] == value:
+                continue
+            flag = ctypes.c_int(0)
+            used(None, (PREFIX + name).encode(), ctypes.byref(flag))
+            if not flag.value:
+                raise ConfigError(f"solver.petsc.{name}", "PETSc did not use this option (unknown name, or "
+                                                          "it does not apply to the chosen solver)")
 
     def set_operator(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
         """Build this step's matrix: ``n_owned`` nodes owned here (rows 2 start .. 2 (start +

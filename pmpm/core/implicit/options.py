@@ -9,7 +9,7 @@
     residual_tolerance = 1e-8      # |R| <= tol * max(|R_0|, |f_int| + |f_ext| at the start)
     energy_tolerance = 1e-12       # |du . R| <= tol * |du_0 . R_0|
     max_iterations = 25            # Newton iterations before the step is halved
-    line_search = true             # backtrack while the residual grows
+    line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
 
     [solver.petsc]                 # PETSc options of the linear solve (without the dash)
@@ -29,7 +29,7 @@ ANALYSES = ("dynamic", "static")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
-                     "line_search": True, "max_halvings": 6}
+                     "line_search": False, "max_halvings": 6}
 
 
 def read_integrator(t):
