@@ -9,9 +9,9 @@
   equations, and both equal a finite-difference derivative of -f_int in an elastic and in a
   plastic state (bilinear J2, where a third of the points yield).
 
-Shown to fail on planted bugs (restored): the geometric term dropped in assemble_blocks
-(K vs FD 2e-3), B's shear row with f_ax in place of f_ay (K vs FD O(1)), the sign of u v^T / w
-flipped in the plane-stress J2 tangent (material FD 0.3).
+Shown to fail on planted bugs (restored): the geometric term dropped in assemble_blocks, B's
+shear row with f_xx in place of f_xy, the sign of u v^T / w flipped in the plane-stress J2
+tangent (the material test and the assembled test both fail).
 """
 import numpy as np
 import pytest

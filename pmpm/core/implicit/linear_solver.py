@@ -24,7 +24,7 @@ import numpy as np
 
 from pmpm.errors import ConfigError
 
-__all__ = ["LinearSolver", "petsc", "DEFAULT_OPTIONS", "PREFIX", "check_option_names", "command_line_options"]
+__all__ = ["LinearSolver", "validate_options", "petsc", "DEFAULT_OPTIONS", "PREFIX", "check_option_names", "command_line_options"]
 logger = logging.getLogger(__name__)
 
 #: the options prefix of pmpm's solver objects (a user's -ksp_type reaches them as pmpm_ksp_type)
@@ -105,6 +105,22 @@ def _option_text(value):
     return str(value)
 
 
+def validate_options(options):
+    """ConfigError naming the first option PETSc does not use: a 2 x 2 system is solved on this
+    process alone with the options, then PETSc is asked which it read. Called while the scene
+    is checked (implicit scenes only), so a misspelt option stops the run before it writes."""
+    from mpi4py import MPI
+    probe = LinearSolver(MPI.COMM_SELF, options)
+    try:
+        block = np.array([[[2.0, 0.0], [0.0, 2.0]]])
+        one = np.zeros(1, np.int64)
+        probe.set_operator(1, 0, np.zeros(1, np.int64), np.array([0, 1]), np.zeros(1, np.int64), block, one + 1, one)
+        probe.solve(np.ones(2))
+        probe.check_unused()
+    finally:
+        probe.destroy()
+
+
 class LinearSolver:
     """A KSP on ``comm`` whose operator is rebuilt each step from per-rank blocks.
 
@@ -128,6 +144,7 @@ class LinearSolver:
             db.setValue(PREFIX + name, _option_text(value))
         self.ksp = None
         self.A = None
+        self._rows = -1
         self.iterations = 0
 
     def _has_mumps(self):
@@ -178,6 +195,9 @@ class LinearSolver:
         if self.ksp is None:
             self.ksp = PETSc.KSP().create(comm=self.comm)
             self.ksp.setOptionsPrefix(PREFIX)
+        elif self._rows != 2 * n_owned:
+            self.ksp.reset()   # the active nodes changed: a new size (PETSc keeps the options)
+        self._rows = 2 * n_owned
         self.ksp.setOperators(A)
         self.ksp.setFromOptions()
         self.x, self.b = A.createVecs()

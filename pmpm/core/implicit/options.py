@@ -18,7 +18,7 @@
 
 What the implicit integrator does not support yet is refused here, one line naming the key.
 """
-from pmpm.core.implicit.linear_solver import check_option_names
+from pmpm.core.implicit.linear_solver import check_option_names, validate_options
 from pmpm.errors import ConfigError
 
 __all__ = ["read_integrator", "INTEGRATORS", "ANALYSES", "IMPLICIT_DEFAULTS", "read_implicit", "read_petsc", "check_implicit_scene",
@@ -118,3 +118,4 @@ def check_implicit_scene(scene, materials):
     for label, m in zip(scene.materials, materials):
         if not m.has_tangent:
             raise ConfigError(f"materials.{label}.type", f"{m.name} has no tangent for the implicit integrator yet")
+    validate_options(cfg.petsc)
