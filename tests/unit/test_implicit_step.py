@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from implicit_scenes import (BAR_CFL_STEP, BAR_OMEGA, bar_scene, cantilever_scene, timoshenko_tip_deflection,
+from pmpm.benchmarks.implicit import (BAR_CFL_STEP, BAR_OMEGA, bar_scene, cantilever_scene, timoshenko_tip_deflection,
                              BEAM_L)
 from pmpm.core.implicit.newmark import period_elongation
 from pmpm.core.solver import Solver

@@ -1,8 +1,13 @@
-"""Scenes of the implicit integrator's tests (serial and MPI): the fixed-free bar of design.md
-section 7 and a steel cantilever under gravity, as TOML data."""
+"""Scenes of the implicit integrator (docs/implicit.md): the fixed-free bar of design.md section 7
+and a steel cantilever under gravity, as TOML data, for the tests (serial and MPI) and the
+kernel warm-up."""
 import math
 
+from mpi4py import MPI
+
 from pmpm.scene.config import parse_scene
+
+__all__ = ["bar_scene", "cantilever_scene", "timoshenko_tip_deflection", "warm_implicit"]
 
 #: the bar (design.md section 7): L = 25, E = 100, rho = 1, first mode omega = pi / 5, T = 10
 BAR_L, BAR_OMEGA = 25.0, math.pi / 5
@@ -49,3 +54,16 @@ def timoshenko_tip_deflection(gravity):
     inertia = BEAM_D ** 3 / 12
     shear = BEAM_E / (2 * (1 + BEAM_NU))
     return q * BEAM_L ** 4 / (8 * BEAM_E * inertia) + q * BEAM_L ** 2 / (2 * 5 / 6 * shear * BEAM_D)
+
+
+def warm_implicit():
+    """Compile the implicit kernels' specialisations (the warm-up, pmpm.warmup): the bar
+    (dynamics, elastic) and the cantilever (statics) with each material that has a tangent."""
+    from pmpm.core.solver import Solver
+    plastic = {"E": BEAM_E, "nu": BEAM_NU, "density": BEAM_RHO, "yield_stress": 250e6, "hardening": 0.05}
+    scenes = [bar_scene(1.0, 2.0), cantilever_scene(h=0.2)]
+    scenes += [cantilever_scene(h=0.2, material=dict(plastic, type=kind))
+               for kind in ("bilinear_vonmises", "smooth_vonmises")]
+    for scene in scenes:
+        s = Solver(scene, MPI.COMM_SELF)
+        s.step()
