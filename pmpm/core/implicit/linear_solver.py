@@ -18,7 +18,6 @@ import ctypes
 import glob
 import logging
 import os
-import sys
 
 import numpy as np
 
@@ -41,7 +40,7 @@ def petsc():
     loads or initialises PETSc."""
     import petsc4py
     if not getattr(petsc4py, "_pmpm_initialised", False):
-        petsc4py.init([sys.argv[0]])
+        petsc4py.init(["pmpm"])   # (the program name only: PETSc reads no options from argv)
         petsc4py._pmpm_initialised = True
     from petsc4py import PETSc
     return PETSc
@@ -140,6 +139,9 @@ class LinearSolver:
                 and not self._has_mumps():
             self.options["pc_factor_mat_solver_type"] = "petsc"
         db = self.PETSc.Options()
+        for name in list(db.getAll()):   # an earlier scene's options (one process, several runs)
+            if name.startswith(PREFIX):
+                db.delValue(name)
         for name, value in self.options.items():
             db.setValue(PREFIX + name, _option_text(value))
         self.ksp = None
