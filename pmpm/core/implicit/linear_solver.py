@@ -146,7 +146,7 @@ class LinearSolver:
             db.setValue(PREFIX + name, _option_text(value))
         self.ksp = None
         self.A = None
-        self._rows = -1
+        self._sizes = None
         self.iterations = 0
 
     def _has_mumps(self):
@@ -194,12 +194,15 @@ class LinearSolver:
         if self.A is not None:
             self.A.destroy()
         self.A = A
+        if self.ksp is not None and self._sizes != A.getSizes():
+            # the active nodes changed: a new solver (a reset KSP keeps sub-solvers, e.g. the
+            # multigrid levels, of the old size)
+            self.ksp.destroy()
+            self.ksp = None
         if self.ksp is None:
             self.ksp = PETSc.KSP().create(comm=self.comm)
             self.ksp.setOptionsPrefix(PREFIX)
-        elif self._rows != 2 * n_owned:
-            self.ksp.reset()   # the active nodes changed: a new size (PETSc keeps the options)
-        self._rows = 2 * n_owned
+        self._sizes = A.getSizes()
         self.ksp.setOperators(A)
         self.ksp.setFromOptions()
         self.x, self.b = A.createVecs()
