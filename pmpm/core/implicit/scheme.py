@@ -79,6 +79,12 @@ class ImplicitNewmark:
             if self.fraction < 1.0 and self.converged_in_row >= GROW_AFTER:
                 self.fraction = min(1.0, 2.0 * self.fraction)
                 self.converged_in_row = 0
+        if s.t + dt >= s.scene.solver.end_time * (1.0 - 1e-12) and s.decomp.rank == 0:
+            st = self.stats
+            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d residual evaluations, "
+                        "%d linear iterations, %d halvings", st["steps"], st["newton_iterations"],
+                        st["newton_iterations"] / max(st["steps"], 1), st["residual_evaluations"],
+                        st["linear_iterations"], st["halvings"])
 
     def _start(self, s):
         """First call: the PETSc solver, the options, and Newmark's start accelerations."""
