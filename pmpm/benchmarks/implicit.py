@@ -17,7 +17,7 @@ BAR_CFL_STEP = 0.025
 BEAM_L, BEAM_D, BEAM_E, BEAM_RHO, BEAM_NU, BEAM_Y0 = 4.0, 0.4, 2e11, 7850.0, 0.3, 0.8
 
 
-def bar_scene(time_step, end_time, v0=0.001, cells=(54, 3), petsc=None):
+def bar_scene(time_step, end_time, v0=0.001, cells=(54, 3), petsc=None, implicit=None):
     """The bar of cases/bar.toml in its first mode, implicit (v0 small: linear in practice)."""
     data = {"title": "bar", "formulation": "plane_stress", "particles_per_cell": 2,
             "grid": {"origin": [0.0, 0.0], "cell_size": 0.5, "cells": list(cells)},
@@ -28,6 +28,8 @@ def bar_scene(time_step, end_time, v0=0.001, cells=(54, 3), petsc=None):
             "solver": {"integrator": "implicit", "time_step": time_step, "end_time": end_time}}
     if petsc:
         data["solver"]["petsc"] = dict(petsc)
+    if implicit:
+        data["solver"]["implicit"] = dict(implicit)
     return parse_scene(data, "bar.toml")
 
 

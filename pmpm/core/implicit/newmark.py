@@ -9,6 +9,12 @@ velocity v_n and acceleration a_n,
 so d a_{n+1} / d u = 1 / (beta dt^2): the mass term of the tangent. beta = 1/4, gamma = 1/2 is
 the trapezoidal rule: unconditionally stable, no numerical damping, second order, and its
 period elongation is known in closed form (``period_elongation``).
+
+HHT-alpha (Hilber, Hughes & Taylor 1977), ``alpha`` in [-1/3, 0]: the equation of motion is
+taken at n + 1 + alpha for the forces, M a_{n+1} = (1 + alpha) F_{n+1} - alpha F_n (F = f_ext +
+f_int), with beta = (1 - alpha)^2 / 4, gamma = (1 - 2 alpha) / 2: still second order and
+unconditionally stable, and it damps the modes with omega dt >> 1 (the spurious high modes of
+the grid) while leaving the low ones almost untouched. alpha = 0 is the trapezoidal rule.
 """
 import math
 
@@ -24,9 +30,11 @@ class Newmark:
     beta, gamma : float
     """
 
-    def __init__(self, dt, beta=0.25, gamma=0.5):
-        self.dt, self.beta, self.gamma = dt, beta, gamma
-        self.mass_factor = 1.0 / (beta * dt * dt)
+    def __init__(self, dt, alpha=0.0):
+        self.dt, self.alpha = dt, alpha
+        self.beta = 0.25 * (1.0 - alpha) ** 2
+        self.gamma = 0.5 - alpha
+        self.mass_factor = 1.0 / (self.beta * dt * dt)
 
     def predictor(self, v, a):
         """The displacement increment if the acceleration stayed a_n (Newton's first guess)."""

@@ -11,6 +11,7 @@
     max_iterations = 25            # Newton iterations before the step is halved
     line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
+    hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
 
     [solver.petsc]                 # PETSc options of the linear solve (without the dash)
     ksp_type = "cg"
@@ -29,7 +30,7 @@ ANALYSES = ("dynamic", "static")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
-                     "line_search": False, "max_halvings": 6}
+                     "line_search": False, "max_halvings": 6, "hht_alpha": 0.0}
 
 
 def read_integrator(t):
@@ -59,7 +60,9 @@ def read_implicit(t):
                                         low_open=True, high_open=True),
            "max_iterations": t.integer("max_iterations", d["max_iterations"], low=1, high=1000),
            "line_search": t.boolean("line_search", d["line_search"]),
-           "max_halvings": t.integer("max_halvings", d["max_halvings"], low=0, high=40)}
+           "max_halvings": t.integer("max_halvings", d["max_halvings"], low=0, high=40),
+           # HHT-alpha: 0 is the trapezoidal rule, -1/3 the most damping of the high modes
+           "hht_alpha": t.number("hht_alpha", d["hht_alpha"], low=-1.0 / 3.0, high=0.0)}
     t.finish()
     return out
 

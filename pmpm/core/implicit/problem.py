@@ -36,9 +36,12 @@ class GridProblem:
         External nodal forces at the step's end (halo-summed).
     v, a : ndarray (nx, ny, 2) or None
         Nodal velocity and acceleration at the step's start (dynamics).
+    fext_start : ndarray (nx, ny, 2), optional
+        External nodal forces at the step's start (HHT-alpha only: its residual weighs the
+        start's forces by -alpha).
     """
 
-    def __init__(self, s, linear, rule, fext, v, a):
+    def __init__(self, s, linear, rule, fext, v, a, fext_start=None):
         self.s, self.linear, self.rule = s, linear, rule
         w, g = s.window, s.grid
         self.mass = w.G[..., 0]
@@ -46,6 +49,8 @@ class GridProblem:
         self.dofs = StepDofs(self.mass, s.mass_cutoff, held, s._owned_local, s.decomp,
                              IK.stencil_span(s.shape))
         self.fext, self.v, self.a = fext, v, a
+        self.alpha = rule.alpha if rule is not None else 0.0
+        self.fext_start = fext_start
         self.geometry = (w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
         p = s.particles
         self.x = p["x"]
@@ -89,8 +94,12 @@ class GridProblem:
         return R
 
     def _start_force_scale(self):
-        """The norm of the internal and external forces at the step's start (u = 0)."""
-        fi = self.dofs.owned_values(self.internal_force(np.zeros(self.mass.shape + (2,))))
+        """The norm of the internal and external forces at the step's start (u = 0); keeps
+        the start's total force F_n for HHT-alpha."""
+        fint0 = self.internal_force(np.zeros(self.mass.shape + (2,)))
+        if self.alpha:
+            self.force_start = fint0 + self.fext_start
+        fi = self.dofs.owned_values(fint0)
         fe = self.dofs.owned_values(self.fext)
         return float(np.sqrt(self.s.decomp.allreduce_sum(
             float(np.dot(fi[self.free], fi[self.free]) + np.dot(fe[self.free], fe[self.free])))))
@@ -99,6 +108,9 @@ class GridProblem:
         """(owned residual vector with held components zero, its global 2-norm)."""
         R = self.internal_force(u)
         R += self.fext
+        if self.alpha:   # HHT: the forces at n + 1 + alpha
+            R *= 1.0 + self.alpha
+            R -= self.alpha * self.force_start
         if self.rule is not None:
             R -= self.mass[..., None] * self.rule.acceleration(u, self.v, self.a)
         r = self.dofs.owned_values(R)
@@ -117,6 +129,8 @@ class GridProblem:
         span = d.span
         Kb = np.zeros((d.n_local, span * span, 2, 2))
         IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, d.lid, Kb, *self.geometry)
+        if self.alpha:
+            Kb *= 1.0 + self.alpha
         diag = self._diagonal(Kb)
         node_i, node_j = np.nonzero(d.active)
         nb = int(np.count_nonzero(np.any(Kb != 0.0, axis=(2, 3)))) + d.n_local

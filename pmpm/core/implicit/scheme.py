@@ -51,6 +51,7 @@ class ImplicitNewmark:
                       "linear_iterations": 0, "halvings": 0}
         self.history = []          # (|R|, energy) of the last step's iterations
         self.held_force = np.zeros(2)   # sum of the nodal forces on held components (last step)
+        self.options_checked = False
 
     # -- one scene step, in as many sub-steps as Newton needs ------------------------------
     def advance(self, s, dt):
@@ -98,7 +99,7 @@ class ImplicitNewmark:
             s.particles.add_field(ACCELERATION, (2,))
             if self.dynamic:
                 self.start_accelerations(s)
-        self.beta, self.gamma = 0.25, 0.5
+        self.alpha = self.options["hht_alpha"]
 
     # -- phases ------------------------------------------------------------------------------
     def grid_from_particles(self, s, t_load):
@@ -115,6 +116,22 @@ class ImplicitNewmark:
             idx, load_id, load_w, load_vec = point
             K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *s._geometry())
         s.exchange_halo(slice(0, 7))
+
+    def external_forces(self, s, t):
+        """Halo-summed external nodal forces at time ``t`` (weight and point loads), in a
+        window array of their own (HHT-alpha needs the step's start forces too)."""
+        p, w, g = s.particles, s.window, s.grid
+        T = np.zeros(w.G.shape)
+        geometry = (T, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
+        if s.loads.gravity is not None:
+            IK.scatter_inertia_and_gravity(p["x"], p["m"], None, s.loads.gravity, *geometry)
+        point = s.loads.point_forces(p, t)
+        if point is not None:
+            idx, load_id, load_w, load_vec = point
+            K.scatter_point_loads(idx, p["x"], load_id, load_w, load_vec, *geometry)
+        F = np.ascontiguousarray(T[..., FORCE])
+        s.decomp.sum_halo(F)
+        return F
 
     def nodal_start(self, s):
         """Nodal velocity and acceleration at the step's start (zero off the active nodes);
@@ -149,9 +166,10 @@ class ImplicitNewmark:
     def substep(self, s, h, t0):
         """One step of length ``h`` from time ``t0``; raises NewtonFailed (particles untouched)."""
         self.grid_from_particles(s, t0 + h)
-        rule = Newmark(h, self.beta, self.gamma) if self.dynamic else None
+        rule = Newmark(h, self.alpha) if self.dynamic else None
         v, a = self.nodal_start(s) if self.dynamic else (None, None)
-        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a)
+        start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
+        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
         u = np.where(problem.dofs.held, problem.held_increment(h), u)
@@ -163,8 +181,9 @@ class ImplicitNewmark:
         finally:
             self.stats["residual_evaluations"] += problem.evaluations
             self.stats["linear_iterations"] = self.linear.iterations
-        if self.stats["steps"] == 0:
+        if not self.options_checked and self.linear.ksp is not None:   # after the first solve
             self.linear.check_unused()
+            self.options_checked = True
         self.stats["newton_iterations"] += iterations
         self.stats["steps"] += 1
         self.commit(s, problem, u, rule, v, a, t0, h)
