@@ -104,3 +104,16 @@ def test_a_good_implicit_scene_with_command_line_options_runs(tmp_path):
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "case_results" / "case.h5").exists()
+
+
+def test_newton_failure_at_the_smallest_step_stops_with_exit_3(tmp_path):
+    """A step Newton cannot converge (one iteration allowed, a tolerance below round-off, no
+    halving) stops the run: exit 3, the message names Newton and max_halvings."""
+    case = tmp_path / "case.toml"
+    case.write_text(BASE.replace("[[boundary]]", "[loads]\ngravity = [0.0, -9.81]\n\n[[boundary]]")
+                    + "[solver.implicit]\nmax_iterations = 1\nresidual_tolerance = 1e-30\nmax_halvings = 0\n")
+    proc = subprocess.run([sys.executable, "-m", "pmpm.cli", str(case), "--no-plots"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 3, (proc.returncode, proc.stderr[-2000:])
+    assert "Newton's method did not converge" in proc.stderr
+    assert "solver.implicit.max_halvings = 0" in proc.stderr
