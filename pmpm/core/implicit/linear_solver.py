@@ -108,7 +108,7 @@ def validate_options(options):
     """ConfigError naming the first option PETSc does not use: a 2 x 2 system is solved on this
     process alone with the options, then PETSc is asked which it read. Called while the scene
     is checked (implicit scenes only), so a misspelt option stops the run before it writes."""
-    from mpi4py import MPI
+    from mpi4py import MPI   # (here, not at the top: the command line's parser imports this module)
     probe = LinearSolver(MPI.COMM_SELF, options)
     try:
         block = np.array([[[2.0, 0.0], [0.0, 2.0]]])
@@ -147,6 +147,7 @@ class LinearSolver:
         self.ksp = None
         self.A = None
         self._sizes = None
+        self._pattern = None
         self.iterations = 0
 
     def _has_mumps(self):
@@ -177,6 +178,21 @@ class LinearSolver:
         ``values`` (nnz, 2, 2). ``diag_nnz``/``off_nnz``: blocks per owned row in the owned and
         the other columns (preallocation)."""
         PETSc = self.PETSc
+        pattern = (rows.copy(), indptr.copy(), cols.copy())
+        same = self.A is not None and self._sizes[0][0] == 2 * n_owned and all(
+            a.shape == b.shape and np.array_equal(a, b) for a, b in zip(pattern, self._pattern))
+        if self.comm.allreduce(0 if same else 1) == 0:   # every rank, or none
+            # the same blocks as the last matrix (the iterations of one step): new values only,
+            # so the factorisation reuses its analysis (MUMPS) or its symbolic part (PETSc's LU)
+            self.A.zeroEntries()
+            self.A.setValuesBlockedIJV(indptr.astype(PETSc.IntType), cols.astype(PETSc.IntType),
+                                       values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES,
+                                       rowmap=rows.astype(PETSc.IntType))
+            self.A.assemblyBegin()
+            self.A.assemblyEnd()
+            self.ksp.setOperators(self.A)
+            return
+        self._pattern = pattern
         A = PETSc.Mat().create(comm=self.comm)
         A.setSizes(((2 * n_owned, PETSc.DETERMINE), (2 * n_owned, PETSc.DETERMINE)), bsize=2)
         A.setType(PETSc.Mat.Type.AIJ)
