@@ -159,7 +159,11 @@ def main(argv=None):
                     help="PETSc options of the implicit run, e.g. pc_type=cholesky")
     ap.add_argument("--implicit-only", action="store_true", help="skip the explicit run")
     ap.add_argument("--variant", default="elastic", choices=("elastic", "elastoplastic"))
+    ap.add_argument("--static", action="store_true",
+                    help="instead: one static step under the load (analysis = static), the joint's drift")
     a = ap.parse_args(argv)
+    if a.static:
+        return _static_portal(a)
     r = portal_benchmark(a.cell, a.dt, a.t_end, dict(o.split("=", 1) for o in a.petsc), not a.implicit_only,
                          a.variant)
     r["petsc"] = a.petsc
@@ -172,6 +176,31 @@ def main(argv=None):
         if r["explicit_wall_s"] is not None:
             print(f"explicit: {r['explicit_steps']} steps, {r['explicit_wall_s']:.1f} s wall; peak drift "
                   f"{r['explicit_peak_drift_m'] * 1e3:.3f} mm at {r['explicit_peak_time_s']:.4f} s")
+        print(json.dumps(r))
+
+
+def _static_portal(a):
+    """One static step of the portal under its load: the upper-left joint's drift (JSON line)."""
+    import dataclasses
+    import json
+    import time
+    import numpy as np
+    from pmpm.core.solver import Solver
+    from pmpm.io.tracking import Tracker
+    scene = portal_scene(a.cell, 1.0, 1.0, variant=a.variant)
+    scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, analysis="static"))
+    s = Solver(scene, MPI.COMM_WORLD)
+    tr = Tracker(scene.output.track, s)
+    start = time.perf_counter()
+    s.step()
+    k = [t.name for t in scene.output.track].index("upper_left_joint")
+    drift = float(np.asarray(tr.sample())[k, 0])
+    r = {"benchmark": "implicit_portal_static", "cell_size": a.cell, "variant": a.variant,
+         "static_drift_m": drift, "newton_iterations": s.scheme.stats["newton_iterations"],
+         "load_on_supports_N": [float(v) for v in s.scheme.held_force], "wall_s": time.perf_counter() - start}
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"static ({a.variant}, {a.cell:g} m cells): drift {drift * 1e3:.2f} mm, "
+              f"{r['newton_iterations']} Newton iterations, supports carry {r['load_on_supports_N']} N")
         print(json.dumps(r))
 
 
