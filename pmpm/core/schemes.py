@@ -6,6 +6,7 @@ order of the solver's phases; each scheme is that order, read top to bottom.
 """
 from pmpm.registry import lookup, names
 from pmpm.core.kernels import MOM, REMAP
+from pmpm.core.implicit.scheme import ImplicitNewmark
 
 #: grid fields each halo exchange carries
 ALL = slice(0, 5)           # mass, momentum, force
@@ -13,7 +14,7 @@ MASS_MOMENTUM = slice(0, 3)
 FORCE = slice(3, 5)
 REMAPPED = slice(5, 7)      # MUSL re-mapped momentum
 
-__all__ = ["Scheme", "USF", "USL", "MUSL", "make_scheme"]
+__all__ = ["Scheme", "USF", "USL", "MUSL", "Newmark", "make_scheme"]
 
 
 class Scheme:
@@ -84,6 +85,10 @@ class MUSL(Scheme):
         s.grid_velocity(source=REMAP, target=REMAP)
         s.update_strain(dt, velocity_field=REMAP, move=True)
         s.update_stress()
+
+
+class Newmark(ImplicitNewmark, Scheme):
+    """The implicit integrator (pmpm.core.implicit.scheme), ``solver.integrator = "implicit"``."""
 
 
 def make_scheme(name, cfg=None):
