@@ -32,6 +32,10 @@ class Scheme:
         """The scheme with its options from ``cfg`` (the explicit schemes have none)."""
         return cls()
 
+    def check_parts(self, effects, transfer, grid_fields):
+        """Refuse (ConfigError) parts of the run this scheme cannot drive; called by
+        pmpm.build before the solver is built. The explicit schemes drive every part."""
+
     def advance(self, s, dt):
         raise NotImplementedError
 

@@ -72,7 +72,11 @@ CASES = {
                         "solver.analysis: static analyses need solver.integrator = \"implicit\""),
     "contact": (_append("[contact]\nfriction = 0.0"), [], "contact: is explicit-only for now"),
     "cpdi": (_append('interpolation = "cpdi"'), [], "solver.interpolation: GIMP and CPDI are explicit-only"),
-    "damping": (_append("[loads]\ndamping = 2.0"), [], "loads.damping: is explicit-only for now"),
+    "damping": (_append("[loads]\ndamping = 2.0"), [], "damping: is explicit-only for now"),
+    # the parts refuse themselves (implicit_support): a transfer, and an effect of the results layer
+    "apic": (_append('transfer = "apic"'), [], "solver.transfer: apic: the implicit step updates velocities"),
+    "reactions": (_edit('upper = [0.0, 2.0]', 'upper = [0.0, 2.0]\nreaction = true'), [],
+                  "reactions: is explicit-only for now"),
     "checkpoints": (_append("[output]\ncheckpoint_interval = 0.01"), [], "output.checkpoint_interval: restart is "
                                                                           "explicit-only"),
     "neo-hookean": (_edit('type = "linear_elastic"', 'type = "neo_hookean"'), [],

