@@ -146,9 +146,10 @@ def portal_benchmark(cell_size=0.05, time_step=1e-3, end_time=0.25, petsc=None, 
 
 
 def main(argv=None):
-    """``python -m pmpm.benchmarks.implicit [--cell 0.05] [--dt 1e-3] [--t-end 0.25]``: the
-    elastic portal with both integrators; figures, then one JSON line."""
-    ap = argparse.ArgumentParser(description=main.__doc__)
+    """``pmpm bench implicit [--cell 0.05] [--dt 1e-3] [--t-end 0.25]`` (or ``python -m
+    pmpm.benchmarks.implicit ...``): the elastic portal with both integrators; figures, then one
+    JSON line."""
+    ap = argparse.ArgumentParser(prog="pmpm bench implicit", description=main.__doc__)
     ap.add_argument("--cell", type=float, default=0.05)
     ap.add_argument("--dt", type=float, default=1e-3)
     ap.add_argument("--t-end", type=float, default=0.25)
