@@ -697,7 +697,7 @@ def _same_file(a, b):
 
 
 def _study(rows, quick, outdir, csv_path, t_study, log, out, command, clock, cfl, cfl_only, write_rows):
-    from pmpm.benchmarks import accuracy_cfl
+    from studies import accuracy_cfl
     from_csv = rows is not None
     cfl_rows = best = None
     if not from_csv:
