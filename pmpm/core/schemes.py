@@ -2,7 +2,9 @@
 
 USF (update stress first), USL (update stress last) and MUSL (modified USL, the paper's choice,
 eq. 6: particle momenta re-mapped to the grid before the strain increment) differ only in the
-order of the solver's phases; each scheme is that order, read top to bottom.
+order of the solver's phases; each scheme is that order, read top to bottom. ``newmark`` is the
+implicit integrator (pmpm.core.implicit.scheme: its own Newton loop after the solver's first
+phases); it refuses, in ``check_parts``, the parts that do not say ``implicit_support``.
 """
 from pmpm.registry import lookup, names
 from pmpm.core.kernels import MOM, REMAP

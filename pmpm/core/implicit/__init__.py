@@ -2,6 +2,7 @@
 the materials' tangents as the stiffness, PETSc for the linear solve.
 
     options        the scene keys ([solver] integrator, analysis; [solver.implicit]; [solver.petsc])
+                   and what is refused that is no part of the solver (the parts: scheme.check_parts)
     kernels        numba kernels: step deformation, internal force, tangent blocks, Newmark update
     reference      their NumPy twins (tests)
     dofs           the step's unknowns: mass rule, global numbering over the slabs, block CSR
