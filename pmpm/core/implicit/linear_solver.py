@@ -37,8 +37,13 @@ OPTION_FAMILIES = ("ksp_", "pc_", "mat_", "mg_", "sub_")
 def petsc():
     """The petsc4py PETSc module, initialised on first use (with pmpm's MPI communicator
     already set up by mpi4py). Imported here, not at the top, so that an explicit run never
-    loads or initialises PETSc."""
-    import petsc4py
+    loads or initialises PETSc. Without petsc4py: ConfigError on solver.integrator (exit 2, one
+    line) rather than a traceback."""
+    try:
+        import petsc4py
+    except ImportError:
+        raise ConfigError("solver.integrator", "the implicit integrator needs petsc4py, which this Python "
+                                               "does not have (setup.sh builds it against Debian's PETSc)") from None
     if not getattr(petsc4py, "_pmpm_initialised", False):
         petsc4py.init(["pmpm"])   # (the program name only: PETSc reads no options from argv)
         petsc4py._pmpm_initialised = True
