@@ -23,6 +23,7 @@ import pmpm.results.sections  # noqa: F401
 from decomposition import get_comm
 from pmpm.core import kernels as K
 from pmpm.core.effects import EffectList, registered_effects
+from pmpm.core.fields import GridFields
 from pmpm.core.grid import Grid
 from pmpm.core.particles import OPTIONAL_FIELDS, start_deformation
 from pmpm.core.schemes import make_scheme
@@ -154,9 +155,12 @@ def build_solver(scene, comm=None):
         particles["domain"] = _initial_domains(scene, grid, particles["vol"], particles["body"])
     parts = (grid, decomp, particles, materials, scheme, transfer, effects, step_options(scene), len(points["m"]))
     del points, setup.points
-    grid_fields = None   # one velocity field (pmpm.core.fields); [contact]: one per body
+    grid_fields = GridFields()   # one velocity field (pmpm.core.fields); [contact]: one per body
     if scene.contact is not None:
         grid_fields = BodyFields(scene.contact.friction, *contact_slots(scene))
+    # the scheme refuses the parts it cannot drive (the implicit one: effects, transfer and
+    # grid fields that do not say implicit_support), before anything is allocated for them
+    scheme.check_parts(effects, transfer, grid_fields)
     solver = Solver(*parts, mass_cutoff=cfg.mass_cutoff, keeps_F=keeps_F, rotates_stress=rotates_stress,
                     grid_fields=grid_fields)
     check_time_step(scene, materials, solver.vmax)  # positive, finite, not too many steps

@@ -174,7 +174,9 @@ def _tool(args):
 
 def _scenes(args):
     from pmpm.scene.config import load_scene
-    return load_scene(args.case, args.variant)
+    # PETSc options on the command line (implicit integrator) become [solver.petsc] keys
+    petsc = {f"solver.petsc.{name}": value for name, value in getattr(args, "petsc", {}).items()}
+    return load_scene(args.case, args.variant, petsc or None)
 
 
 def _frame_report(args):
@@ -322,9 +324,12 @@ def main(argv=None):
     if len(argv) == 1 and argv[0] in ("version", "help") and not os.path.exists(argv[0]):
         return _fail(f"{argv[0]}: no such scene file (did you mean pmpm --{argv[0]}?)", EXIT_BAD_INPUT)
     _quiet_warnings()
+    from pmpm.core.implicit.linear_solver import command_line_options
+    petsc, argv = command_line_options(argv)
     args, extra = build_parser().parse_known_args(_with_command(argv))
     if getattr(args, "driver_args", None) is not None:  # pmpm bench accuracy|peer: the driver parses them
         args.driver_args, extra = extra + args.driver_args, []
+    args.petsc = petsc
     if extra:  # named after the subcommand, like every other bad argument
         return (_fail(f"{args.command}: unrecognized arguments: {' '.join(extra)}", EXIT_BAD_INPUT)
                 if _rank_env() == 0 else EXIT_BAD_INPUT)

@@ -537,7 +537,8 @@ class Run:
         for line in self.effects():
             logger.info("  effect on: %s", line)
         # the same on every rank: said once, by rank 0 (other ranks log only their own troubles)
-        if cfg.time_step is not None and cfg.time_step > s.critical_dt() and self.rank == 0:
+        if cfg.time_step is not None and cfg.time_step > s.critical_dt() and self.rank == 0 \
+                and cfg.integrator == "explicit":   # (the implicit integrator is unconditionally stable)
             logger.warning("time_step %.3g s is above the stable limit %.3g s (CFL = 1): expect divergence",
                            cfg.time_step, s.critical_dt())
 

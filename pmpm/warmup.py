@@ -37,6 +37,9 @@ def warm_kernels(verbose=False):
             s = build_solver(load_scene(path, variant)[0], MPI.COMM_SELF)
             for _ in range(2):
                 s.step()
+    # the implicit integrator's kernels (elastic and plastic tangents, dynamics and statics)
+    from pmpm.benchmarks.implicit import warm_implicit
+    warm_implicit()
 
 
 def warm_up():

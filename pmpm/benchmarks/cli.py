@@ -1,6 +1,6 @@
 """``pmpm bench ...``: the benchmark sub-commands and their dispatch.
 
-``throughput``, ``effects``, ``scaling``, ``fixedcost`` and ``ranks`` are the package's own.
+``throughput``, ``effects``, ``scaling``, ``fixedcost``, ``ranks`` and ``implicit`` are the package's own.
 ``accuracy`` and ``peer`` run drivers that live in the repository, not in the installed package
 (``studies/accuracy.py``: sweeps against closed forms and an FE model; ``bench/peer.py``: Taichi
 peers): from a checkout, with the checkout importable (its root the working directory of
@@ -67,6 +67,11 @@ def add_bench_parser(sub):
     fc.add_argument("--whole-window", action="store_true",
                     help="also time every case with the grid tiles off (each node pass over the whole window)")
     ranks_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
+    # the implicit integrator's portal (docs/implicit.md): its own options, parsed by its main
+    p = bs.add_parser("implicit", help="the portal frame with the implicit and the explicit integrator",
+                      add_help=False)
+    p.add_argument("driver_args", nargs=argparse.REMAINDER,
+                   help="its options (pmpm bench implicit --help lists them: --cell, --dt, --static, ...)")
     for name, (_module, _entry, text) in REPOSITORY_DRIVERS.items():
         p = bs.add_parser(name, help=f"{text} (from a checkout: module doc)", add_help=False)
         p.add_argument("driver_args", nargs=argparse.REMAINDER,
@@ -101,6 +106,9 @@ def main(args):
     from pmpm.benchmarks.fixed_cost import fixed_cost
     from pmpm.benchmarks.scaling import scaling
     from pmpm.benchmarks.throughput import effects, throughput
+    from pmpm.benchmarks.implicit import main as implicit_portal
+    if args.bench == "implicit":
+        return implicit_portal(args.driver_args)
     if args.bench in REPOSITORY_DRIVERS:
         return _repository_driver(args.bench, args.driver_args)
     if args.bench == "throughput":

@@ -34,6 +34,8 @@ What an effect gives the step, in the order of a step (docs/architecture.md draw
   checkpointed like any field);
 * ``describe()``: lines of the run header's ``effect on:`` list;
 * ``summary(s)``: entries of the run summary at the end (the first fracture of each body).
+* ``implicit_support``: True if the implicit integrator carries the effect (default False:
+  refused there, so that a new effect is never silently left out of an implicit step).
 
 A material can contribute energy terms too (:data:`ENERGY_TERMS`, ``register_energy``): a
 damage model's dissipated energy is one more column without a change here.
@@ -96,6 +98,10 @@ class Effect:
     body_acceleration = None
     #: coefficient c (1/s) of the nodal force -c m v of the grid update; None: none
     nodal_damping = None
+    #: whether the implicit integrator (pmpm.core.implicit) carries this effect: it calls none
+    #: of the explicit step's hooks, so an effect says so only when the integrator does what
+    #: the effect does (False: a scene naming it is refused with solver.integrator = "implicit")
+    implicit_support = False
 
     @classmethod
     def create(cls, scene, setup):

@@ -16,6 +16,12 @@ __all__ = ["GridFields"]
 class GridFields:
     """One velocity field on the grid window ``s.window.G`` (the solver ``s``'s phases)."""
 
+    #: the implicit integrator's equations are those of one shared field (a subclass with
+    #: other fields says False: refused with solver.integrator = "implicit")
+    implicit_support = True
+    #: the scene key that chose these grid fields (None: the default)
+    scene_key = None
+
     def on_window(self, s):
         """After every new grid window (start, rebalancing): nothing to allocate here."""
 

@@ -2,10 +2,13 @@
 
 USF (update stress first), USL (update stress last) and MUSL (modified USL, the paper's choice,
 eq. 6: particle momenta re-mapped to the grid before the strain increment) differ only in the
-order of the solver's phases; each scheme is that order, read top to bottom.
+order of the solver's phases; each scheme is that order, read top to bottom. ``newmark`` is the
+implicit integrator (pmpm.core.implicit.scheme: its own Newton loop after the solver's first
+phases); it refuses, in ``check_parts``, the parts that do not say ``implicit_support``.
 """
 from pmpm.registry import lookup, names
 from pmpm.core.kernels import MOM, REMAP
+from pmpm.core.implicit.scheme import ImplicitNewmark
 
 #: grid fields each halo exchange carries
 ALL = slice(0, 5)           # mass, momentum, force
@@ -13,7 +16,7 @@ MASS_MOMENTUM = slice(0, 3)
 FORCE = slice(3, 5)
 REMAPPED = slice(5, 7)      # MUSL re-mapped momentum
 
-__all__ = ["Scheme", "USF", "USL", "MUSL", "make_scheme"]
+__all__ = ["Scheme", "USF", "USL", "MUSL", "Newmark", "make_scheme"]
 
 
 class Scheme:
@@ -30,6 +33,10 @@ class Scheme:
     def from_config(cls, cfg):
         """The scheme with its options from ``cfg`` (the explicit schemes have none)."""
         return cls()
+
+    def check_parts(self, effects, transfer, grid_fields):
+        """Refuse (ConfigError) parts of the run this scheme cannot drive; called by
+        pmpm.build before the solver is built. The explicit schemes drive every part."""
 
     def advance(self, s, dt):
         raise NotImplementedError
@@ -84,6 +91,10 @@ class MUSL(Scheme):
         s.grid_velocity(source=REMAP, target=REMAP)
         s.update_strain(dt, velocity_field=REMAP, move=True)
         s.update_stress()
+
+
+class Newmark(ImplicitNewmark, Scheme):
+    """The implicit integrator (pmpm.core.implicit.scheme), ``solver.integrator = "implicit"``."""
 
 
 def make_scheme(name, cfg=None):

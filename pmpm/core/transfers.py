@@ -60,6 +60,9 @@ class Transfer:
     fields = {}
     #: the PIC share of the particle velocity update (FLIP's option; 0 for the others)
     pic_blend = 0.0
+    #: whether the implicit integrator's Newmark update of the particles stands for this
+    #: transfer (it does for pure FLIP: velocity increments from the grid)
+    implicit_support = False
 
     @classmethod
     def from_config(cls, cfg):
@@ -83,6 +86,7 @@ class FLIP(Transfer):
 
     def __init__(self, pic_blend=0.0):
         self.pic_blend = pic_blend
+        self.implicit_support = pic_blend == 0.0   # Newmark's rule is pure FLIP's increment
 
     @classmethod
     def from_config(cls, cfg):

@@ -104,6 +104,8 @@ class BoxBoundaries(Effect):
     checked against the grid and the particles at construction, marked on every new window."""
 
     name = "boundary"
+    #: the implicit integrator holds the masked components (its held degrees of freedom)
+    implicit_support = True
 
     def __init__(self, boundaries):
         self.boundaries = boundaries

@@ -68,6 +68,8 @@ def _field(f):
 
 
 class BodyFields(GridFields):
+    implicit_support = False   # (no contact correction in the implicit equations yet)
+    scene_key = "contact"
     """One velocity field per contact body (scene ``[contact]``): the grid phases of the solver
     ``s`` on the body window ``B``.
 

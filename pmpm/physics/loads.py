@@ -62,6 +62,8 @@ class Loads(Effect):
     """
 
     name = "loads"
+    #: the implicit integrator scatters gravity and the force sets itself (pmpm.core.implicit.scheme)
+    implicit_support = True
 
     @classmethod
     def create(cls, scene, setup):

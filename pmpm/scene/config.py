@@ -28,6 +28,8 @@ from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 from pmpm.scene.frame import expand_frame
 from pmpm.scene.grid import GridConfig, parse_grid
 from pmpm.scene.analyses import parse_events, parse_pushover
+from pmpm.core.implicit.options import (IMPLICIT_DEFAULTS, check_implicit_scene, read_implicit, read_integrator,
+                                        read_petsc)
 
 __all__ = ["Scene", "load_scene", "resolve_scenes", "check_run_names", "check_written_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
 logger = logging.getLogger(__name__)
@@ -104,6 +106,10 @@ class SolverConfig:
     allow_unstable_time_step: bool = False
     transfer: str = "flip"   # particle <-> grid velocity transfer: "flip" (with pic_blend), "apic", "xpic"
     xpic_order: int = 2      # m of XPIC(m) (1: PIC)
+    integrator: str = "explicit"   # or "implicit" (pmpm.core.implicit, docs/implicit.md)
+    analysis: str = "dynamic"      # or "static" (implicit only)
+    implicit: dict = field(default_factory=lambda: dict(IMPLICIT_DEFAULTS))   # [solver.implicit]
+    petsc: dict = field(default_factory=dict)                                 # [solver.petsc]
 
 
 @dataclass(frozen=True)
@@ -584,9 +590,10 @@ def _solver(t):
     if rate_given and rotations_given and not large_rotations:
         raise ConfigError(t.path("objective_rate"), "needs large_rotations = true (or leave "
                                                     "large_rotations out: a rate switches it on)")
+    integrator, analysis, implicit_scheme = read_integrator(t)
     s = SolverConfig(
         shape_function=t.string("shape_function", "cubic", choices=SHAPE_NAMES),
-        scheme=t.string("scheme", "musl", choices=SCHEME_NAMES),
+        scheme=implicit_scheme or t.string("scheme", "musl", choices=SCHEME_NAMES),
         pic_blend=t.number("pic_blend", 0.0, low=0.0, high=1.0),
         cfl=t.number("cfl", 0.5, low=0.0, high=1.0, low_open=True),
         end_time=t.number("end_time", low=0.0, low_open=True),
@@ -601,7 +608,9 @@ def _solver(t):
         max_estimated_steps=t.integer("max_estimated_steps", 10_000_000, low=1),
         allow_unstable_time_step=t.boolean("allow_unstable_time_step", False),
         transfer=t.string("transfer", "flip", choices=TRANSFERS),
-        xpic_order=t.integer("xpic_order", 2, low=1, high=MAX_XPIC_ORDER))
+        xpic_order=t.integer("xpic_order", 2, low=1, high=MAX_XPIC_ORDER),
+        integrator=integrator, analysis=analysis,
+        implicit=read_implicit(t.table("implicit", None)), petsc=read_petsc(t.table("petsc", None)))
     if t.has("xpic_order") and s.transfer != "xpic":
         raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
     if s.transfer == "xpic":
@@ -795,6 +804,7 @@ def parse_scene(data, path="<scene>"):
     _check_velocity_values(scene.bodies, scene.grid)
     check_work_bounds(scene)  # frames, rows, checkpoints, orders, thicknesses the run can afford
     built = [make_material(materials[k], f"materials.{k}", formulation) for k in materials]
+    check_implicit_scene(scene, built)
     check_time_step(scene, built)
     # what no rank count can shrink (every rank places all points and holds a window at
     # least the ghost columns wide); the solver checks its own rank's share before allocating

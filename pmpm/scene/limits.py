@@ -226,7 +226,9 @@ def check_time_step(scene, materials, vmax=0.0):
         raise ConfigError(key, f"wave speed {c:.3g} m/s gives dt = {dt:.3g} s, about {steps:.3g} "
                                f"steps to end_time, more than solver.max_estimated_steps = "
                                f"{cfg.max_estimated_steps}")
-    if cfg.time_step is not None and cfg.time_step > stable and not cfg.allow_unstable_time_step:
+    # (the implicit integrator is unconditionally stable: its step is the scene's to choose)
+    if cfg.time_step is not None and cfg.time_step > stable and not cfg.allow_unstable_time_step \
+            and cfg.integrator == "explicit":
         raise ConfigError("solver.time_step", f"{cfg.time_step:.3g} s is above the stable step "
                                               f"{stable:.3g} s (cell size {h:g} / (wave speed {c:.3g} m/s of "
                                               f"{key} + particle speed {vmax:.3g} m/s)); set "

@@ -100,6 +100,9 @@ class Material:
     #: overwritten unread, so the solver skips the rotation (and the spin) when every material
     #: of the scene is such a model
     stress_from_F = False
+    #: whether the model gives the implicit integrator its tangent (``tangent``,
+    #: pmpm.core.implicit); a model without one is refused under ``solver.integrator = "implicit"``
+    has_tangent = False
 
     def __init__(self, table, key, formulation):
         if formulation not in self.formulations:
@@ -170,6 +173,23 @@ class Material:
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
         raise NotImplementedError
+
+    def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
+        """The stiffness of the stress update for the implicit integrator: into ``D`` (N, 3, 3)
+        d(sxx, syy, sxy) / d(dexx, deyy, dgxy) of the increment ``de`` that took ``stress0``,
+        ``state0`` (the step's start) to ``stress1``, ``state1`` (what ``update_stress`` made
+        of them). Rows of particles of other materials (``which`` >= 0) are left as they are.
+
+        Parameters
+        ----------
+        stress0, stress1 : ndarray (N, 4)
+        state0, state1 : dict of ndarray
+        de : ndarray (N, 3)
+        D : ndarray (N, 3, 3)
+        mat_ids : ndarray (N,) int32
+        which : int
+        """
+        raise NotImplementedError(f"{self.name} has no tangent for the implicit integrator")
 
 
 class KinematicHardening(Material):

@@ -42,7 +42,7 @@ import numba as nb
 import numpy as np
 
 from pmpm.physics.materials.base import KinematicHardening
-from pmpm.physics.materials.linear_elastic import elastic_increment
+from pmpm.physics.materials.linear_elastic import elastic_increment, elastic_matrix
 
 __all__ = ["BilinearVonMises"]
 
@@ -143,6 +143,98 @@ def _update_bilinear(stress, de, back, eps_p, eps_eq, work, params, plane_strain
         eps_eq[p] += dl
 
 
+@nb.njit(cache=True, inline="always")
+def _on_modes(v, fa, fb, fc):
+    """The operator with eigenvalues fa, fb, fc on (1, 1, 0), (1, -1, 0), (0, 0, 1), applied to v."""
+    sp = 0.5 * (v[0] + v[1]) * fa
+    sm = 0.5 * (v[0] - v[1]) * fb
+    return (sp + sm, sp - sm, v[2] * fc)
+
+
+@nb.njit(cache=True, inline="always")
+def _plane_stress_tangent(D, p, E, nu, sy, k, pa, pb, dl, xi, xt):
+    """The consistent tangent of the projected return (plane stress) of particle p into D[p]:
+    with A(dl) the return's scaling (1/(1 + pa dl) on (1, 1, 0), 1/(1 + pb dl) on (1, -1, 0)
+    and (0, 0, 1), the eigenvectors D and the Mises matrix P share) and sigma = (1 + k dl) xi
+    + eta0, xi = A xi_tr, differentiating the update and Phi(xi)^2 = sigma_y^2 gives
+
+        C = (1 + k dl) A D - u v^T / w,  u = (1 + k dl) A' xi_tr + k xi,  v = D A P xi,
+        w = xi^T P A' xi_tr,
+
+    A' = dA/d dl. Not symmetric with Ziegler's rule (Prager's would make it so)."""
+    ia = 1.0 / (1.0 + pa * dl)
+    ib = 1.0 / (1.0 + pb * dl)
+    da, db = -pa * ia * ia, -pb * ib * ib
+    cps = E / (1.0 - nu * nu)
+    # eigenvalues of D on (1, 1, 0), (1, -1, 0) and (0, 0, 1) (engineering shear: D_33 = G)
+    ea, eb, eg = cps * (1.0 + nu), cps * (1.0 - nu), cps * 0.5 * (1.0 - nu)
+    # P on the same vectors: 1/2, 3/2 and 3
+    h = 1.0 + k * dl
+    apt = _on_modes(xt, da, db, db)                       # A' xi_tr
+    u = (h * apt[0] + k * xi[0], h * apt[1] + k * xi[1], h * apt[2] + k * xi[2])
+    v = _on_modes(xi, ea * ia * 0.5, eb * ib * 1.5, eg * ib * 3.0)   # D A P xi
+    pxi = _on_modes(xi, 0.5, 1.5, 3.0)
+    w = pxi[0] * apt[0] + pxi[1] * apt[1] + pxi[2] * apt[2]
+    for col in range(3):
+        e = (1.0 if col == 0 else 0.0, 1.0 if col == 1 else 0.0, 1.0 if col == 2 else 0.0)
+        adc = _on_modes(e, h * ia * ea, h * ib * eb, h * ib * eg)   # (1 + k dl) A D e_col
+        for row in range(3):
+            D[p, row, col] = adc[row] - u[row] * v[col] / w
+
+
+@nb.njit(cache=True, inline="always")
+def _plane_strain_tangent(D, p, E, nu, sy, c, s):
+    """The consistent tangent of the radial return with Ziegler's rule on dev(xi) (plane
+    strain) into D[p]: dev(sigma) = beta(Phi_tr) s_tr + dev(eta0), beta = (sigma_y / Phi)
+    3 mu / (c + 3 mu) + c / (c + 3 mu), so C = K 1 (x) 1 + 2 mu beta I_dev
+    + beta'(Phi_tr) 3 mu / Phi_tr s_tr (x) s_tr (in-plane rows and columns). ``s`` holds
+    dev(xi_tr) (xx, yy, xy, zz)."""
+    mu = E / (2.0 * (1.0 + nu))
+    kb = E / (3.0 * (1.0 - 2.0 * nu))
+    phi = math.sqrt(1.5 * (s[0] * s[0] + s[1] * s[1] + s[3] * s[3]) + 3.0 * s[2] * s[2])
+    r = 3.0 * mu / (c + 3.0 * mu)
+    beta = sy / phi * r + c / (c + 3.0 * mu)
+    f = -(sy / (phi * phi)) * r * 3.0 * mu / phi
+    D[p, 0, 0] = kb + 4.0 / 3.0 * mu * beta
+    D[p, 1, 1] = D[p, 0, 0]
+    D[p, 0, 1] = D[p, 1, 0] = kb - 2.0 / 3.0 * mu * beta
+    D[p, 0, 2] = D[p, 1, 2] = D[p, 2, 0] = D[p, 2, 1] = 0.0
+    D[p, 2, 2] = mu * beta
+    sv = (s[0], s[1], s[2])
+    for a in range(3):
+        for b in range(3):
+            D[p, a, b] += f * sv[a] * sv[b]
+
+
+@nb.njit(cache=True)
+def _bilinear_tangent(D, stress0, back0, stress1, back1, eq0, eq1, de, params, plane_strain, mat_ids, which):
+    """The consistent tangent of ``_update_bilinear`` (its increment de from stress0, back0 to
+    stress1, back1 with d_lambda = eq1 - eq0): the elastic matrix where the step stayed
+    elastic, else the derivative of the return mapping."""
+    E, nu, sy, alpha = params[0], params[1], params[2], params[3]
+    c = alpha * E / (1.0 - alpha)
+    k = c / sy
+    mu = E / (2.0 * (1.0 + nu))
+    pa = k + E / (2.0 * sy * (1.0 - nu))
+    pb = k + 3.0 * mu / sy
+    for p in range(D.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        dl = eq1[p] - eq0[p]
+        if not dl > 0.0:
+            elastic_matrix(E, nu, plane_strain, D, p)
+            continue
+        ds = elastic_increment(E, nu, plane_strain, de[p, 0], de[p, 1], de[p, 2])
+        xt = (stress0[p, 0] + ds[0] - back0[p, 0], stress0[p, 1] + ds[1] - back0[p, 1],
+              stress0[p, 2] + ds[2] - back0[p, 2], stress0[p, 3] + ds[3] - back0[p, 3])
+        if plane_strain:
+            mean = (xt[0] + xt[1] + xt[3]) / 3.0
+            _plane_strain_tangent(D, p, E, nu, sy, c, (xt[0] - mean, xt[1] - mean, xt[2], xt[3] - mean))
+        else:
+            xi = (stress1[p, 0] - back1[p, 0], stress1[p, 1] - back1[p, 1], stress1[p, 2] - back1[p, 2])
+            _plane_stress_tangent(D, p, E, nu, sy, k, pa, pb, dl, xi, (xt[0], xt[1], xt[2]))
+
+
 class BilinearVonMises(KinematicHardening):
     """Von Mises plasticity with linear (Ziegler) kinematic hardening, by return mapping.
 
@@ -152,6 +244,8 @@ class BilinearVonMises(KinematicHardening):
     """
 
     name = "bilinear_vonmises"
+    has_tangent = True
+
     def read_params(self, p):
         """Read ``yield_stress`` and ``hardening``.
 
@@ -187,3 +281,10 @@ class BilinearVonMises(KinematicHardening):
         """
         _update_bilinear(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
                          state["plastic_work"], self.params, self.plane_strain, mat_ids, which)
+
+    def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
+        """The consistent (algorithmic) tangent of the return mapping (``_bilinear_tangent``):
+        Newton's method on a yielding structure converges quadratically with it."""
+        _bilinear_tangent(D, stress0, state0["back_stress"], stress1, state1["back_stress"],
+                          state0["eps_p_eq"], state1["eps_p_eq"], de, self.params, self.plane_strain,
+                          mat_ids, which)

@@ -3,7 +3,7 @@ import numba as nb
 
 from pmpm.physics.materials.base import Material
 
-__all__ = ["LinearElastic", "elastic_increment"]
+__all__ = ["LinearElastic", "elastic_increment", "elastic_matrix"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -16,6 +16,35 @@ def elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy):
         return (lam * tr + 2 * mu * dexx, lam * tr + 2 * mu * deyy, mu * dgxy, lam * tr)
     c = E / (1 - nu * nu)
     return (c * (dexx + nu * deyy), c * (deyy + nu * dexx), c * 0.5 * (1 - nu) * dgxy, 0.0)
+
+
+@nb.njit(cache=True, inline="always")
+def elastic_matrix(E, nu, plane_strain, D, p):
+    """D[p] = the in-plane elastic matrix d(sxx, syy, sxy) / d(exx, eyy, gxy) (engineering
+    shear) of the formulation: the tangent of ``elastic_increment``."""
+    if plane_strain:
+        lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+        mu = E / (2 * (1 + nu))
+        a, b, g = lam + 2 * mu, lam, mu
+    else:
+        c = E / (1.0 - nu * nu)   # (the plane-stress modulus; spelled apart for tests/mutation)
+        a, b, g = c, c * nu, c * 0.5 * (1 - nu)
+    D[p, 0, 0] = a
+    D[p, 0, 1] = b
+    D[p, 0, 2] = 0.0
+    D[p, 1, 0] = b
+    D[p, 1, 1] = a
+    D[p, 1, 2] = 0.0
+    D[p, 2, 0] = 0.0
+    D[p, 2, 1] = 0.0
+    D[p, 2, 2] = g
+
+
+@nb.njit(cache=True)
+def _elastic_tangent(D, params, plane_strain, mat_ids, which):
+    for p in range(D.shape[0]):
+        if which < 0 or mat_ids[p] == which:
+            elastic_matrix(params[0], params[1], plane_strain, D, p)
 
 
 @nb.njit(cache=True)
@@ -33,6 +62,11 @@ class LinearElastic(Material):
     """Isotropic linear elasticity, plane stress or plane strain."""
 
     name = "linear_elastic"
+    has_tangent = True
 
     def update_stress(self, stress, de, state, mat_ids, which):
         _update_elastic(stress, de, self.params, self.plane_strain, mat_ids, which)
+
+    def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
+        """The elastic matrix (the update is linear: its tangent is exact)."""
+        _elastic_tangent(D, self.params, self.plane_strain, mat_ids, which)

@@ -79,7 +79,7 @@ import numba as nb
 import numpy as np
 
 from pmpm.physics.materials.base import KinematicHardening
-from pmpm.physics.materials.linear_elastic import elastic_increment
+from pmpm.physics.materials.linear_elastic import elastic_increment, elastic_matrix
 
 __all__ = ["SmoothVonMises", "smooth_rate"]
 
@@ -421,6 +421,52 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             work[p] += Y[12, q]
 
 
+@nb.njit(cache=True)
+def _smooth_tangent(D, stress, back, de, params, plane_strain, mat_ids, which):
+    """The paper's tangent modulus E_t = D - H1 H2 (D n)(D n)^T / (n^T D n + n^T G) at the
+    stress and back stress ``stress``, ``back`` (the end of the increment), H2 from the
+    direction of the increment ``de`` (the loading test of ``smooth_rate``). Written with
+    m = Phi n as ``smooth_rate`` does: D - H1 H2 (D m)(D m)^T / (m^T D m + c Phi^3 / sigma_y)."""
+    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
+    c = E * alpha / (1.0 - alpha)   # (the Ziegler modulus of smooth_rate; spelled apart for tests/mutation)
+    cps = E / (1.0 - nu * nu)
+    mu = E / (2.0 * (1.0 + nu))
+    isy = 1.0 / sy
+    for p in range(D.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        elastic_matrix(E, nu, plane_strain, D, p)
+        tx = stress[p, 0] - back[p, 0]
+        ty = stress[p, 1] - back[p, 1]
+        txy = stress[p, 2] - back[p, 2]
+        tz = stress[p, 3] - back[p, 3]
+        if plane_strain:
+            mean = (tx + ty + tz) / 3.0
+            tx -= mean
+            ty -= mean
+            tz -= mean
+            phi2 = 1.5 * (tx * tx + ty * ty + tz * tz) + 3.0 * txy * txy
+            dm0, dm1, dm2 = 3.0 * mu * tx, 3.0 * mu * ty, 3.0 * mu * txy
+            mdm = 3.0 * mu * phi2
+        else:
+            phi2 = tx * tx - tx * ty + ty * ty + 3.0 * txy * txy
+            mxx, myy, mxy = tx - 0.5 * ty, ty - 0.5 * tx, 3.0 * txy
+            dm0, dm1 = cps * (mxx + nu * myy), cps * (myy + nu * mxx)
+            dm2 = cps * 0.5 * (1.0 - nu) * mxy
+            mdm = mxx * dm0 + myy * dm1 + mxy * dm2
+        load = tx * de[p, 0] + ty * de[p, 1] + txy * de[p, 2]
+        if load < 0.0 or phi2 * isy * isy <= _PHI_FLOOR * _PHI_FLOOR:
+            continue  # unloading or stress-free: elastic
+        h2 = 1.0 if load > 0.0 else 0.5
+        phi = math.sqrt(phi2)
+        h1 = (phi * isy) ** N
+        f = h1 * h2 / (mdm + c * phi2 * phi * isy)
+        dm = (dm0, dm1, dm2)
+        for a in range(3):
+            for b in range(3):
+                D[p, a, b] -= f * dm[a] * dm[b]
+
+
 class SmoothVonMises(KinematicHardening):
     """The paper's smooth von Mises plasticity with Ziegler kinematic hardening.
 
@@ -431,6 +477,8 @@ class SmoothVonMises(KinematicHardening):
     """
 
     name = "smooth_vonmises"
+    has_tangent = True
+
     def read_params(self, p):
         """Read ``yield_stress``, ``hardening`` and ``smoothness``.
 
@@ -472,3 +520,10 @@ class SmoothVonMises(KinematicHardening):
         """
         _update_smooth(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
                        state["plastic_work"], self.params, self.plane_strain, mat_ids, which)
+
+    def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
+        """The paper's tangent modulus E_t at the end of the increment (``_smooth_tangent``):
+        the rate form's own stiffness, not the derivative of the sub-stepped update, which it
+        approaches as the increment shrinks (Newton then converges fast but not quadratically
+        where the points yield)."""
+        _smooth_tangent(D, stress1, state1["back_stress"], de, self.params, self.plane_strain, mat_ids, which)

@@ -1,0 +1,246 @@
+"""The linear solve of each Newton iteration, on PETSc (petsc4py).
+
+The unknowns are the displacement increments of the step's active nodes, two per node,
+numbered by their owners: rank r owns the active nodes of its slab (pmpm's decomposition),
+which become the rows [start_r, start_r + 2 n_r) of a PETSc AIJ matrix with block size 2. Each
+rank hands PETSc the blocks its own particles assembled (pmpm.core.implicit.kernels), ghost
+rows included, with ADD_VALUES: PETSc sums the ghost contributions into their owners when the
+matrix is assembled. The Krylov solver and preconditioner come from PETSc's options: the
+scene's ``[solver.petsc]`` table and any ``-ksp_*`` / ``-pc_*`` / ``-mat_*`` options on the
+command line (``pmpm case.toml -ksp_type cg``), under the prefix ``pmpm_``. The default is a
+direct solve (LU by MUMPS on any rank count): robust for the ill-conditioned rows of nodes at
+the edge of the material, and exact, so the Newton iterations see only the tangent's error.
+
+petsc4py is imported when the first implicit solver is built (``petsc``): an explicit run
+never initialises PETSc.
+"""
+import ctypes
+import glob
+import logging
+import os
+
+import numpy as np
+
+from pmpm.errors import ConfigError
+
+__all__ = ["LinearSolver", "validate_options", "petsc", "DEFAULT_OPTIONS", "PREFIX", "check_option_names", "command_line_options"]
+logger = logging.getLogger(__name__)
+
+#: the options prefix of pmpm's solver objects (a user's -ksp_type reaches them as pmpm_ksp_type)
+PREFIX = "pmpm_"
+#: a direct solve unless the scene or the command line says otherwise
+DEFAULT_OPTIONS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+#: families of PETSc options a scene may set (the linear solve's objects only)
+OPTION_FAMILIES = ("ksp_", "pc_", "mat_", "mg_", "sub_")
+
+
+def petsc():
+    """The petsc4py PETSc module, initialised on first use (with pmpm's MPI communicator
+    already set up by mpi4py). Imported here, not at the top, so that an explicit run never
+    loads or initialises PETSc. Without petsc4py: ConfigError on solver.integrator (exit 2, one
+    line) rather than a traceback."""
+    try:
+        import petsc4py
+    except ImportError:
+        raise ConfigError("solver.integrator", "the implicit integrator needs petsc4py, which this Python "
+                                               "does not have (setup.sh builds it against Debian's PETSc)") from None
+    if not getattr(petsc4py, "_pmpm_initialised", False):
+        petsc4py.init(["pmpm"])   # (the program name only: PETSc reads no options from argv)
+        petsc4py._pmpm_initialised = True
+    from petsc4py import PETSc
+    return PETSc
+
+
+def check_option_names(options, key):
+    """Refuse an option name that is not a linear-solver option (``OPTION_FAMILIES``), not a
+    plain identifier, or a value that is not a string, number or boolean. PETSc itself then
+    refuses the names it does not know (``LinearSolver.check_unused``)."""
+    for name, value in options.items():
+        bare = name.lstrip("-")
+        if not bare.replace("_", "").isalnum() or not bare.startswith(OPTION_FAMILIES):
+            raise ConfigError(f"{key}.{name}", f"not a PETSc linear-solver option (names start with "
+                                               f"{', '.join(OPTION_FAMILIES)})")
+        if not isinstance(value, (str, int, float, bool)) or isinstance(value, str) and not value.replace(
+                "_", "").replace(".", "").replace("-", "").replace("+", "").isalnum() and value != "":
+            raise ConfigError(f"{key}.{name}", f"must be a plain string, number or boolean (got {value!r})")
+
+
+def command_line_options(argv):
+    """The ``-ksp_*``, ``-pc_*``, ``-mat_*`` options (with their values) in ``argv``, as a dict,
+    and the arguments left: ``pmpm case.toml -ksp_type cg -ksp_rtol 1e-10``."""
+    out, rest, k = {}, [], 0
+    while k < len(argv):
+        a = argv[k]
+        if a.startswith("-") and a.lstrip("-").startswith(OPTION_FAMILIES) and not a.startswith("--"):
+            value = ""
+            if k + 1 < len(argv) and not (argv[k + 1].startswith("-") and not _is_number(argv[k + 1])):
+                value = argv[k + 1]
+                k += 1
+            out[a.lstrip("-")] = value
+        else:
+            rest.append(a)
+        k += 1
+    return out, rest
+
+
+def _options_used_function():
+    """PetscOptionsUsed of the PETSc library petsc4py loaded (the same process-wide handle)."""
+    import petsc4py
+    cfg = petsc4py.get_config()
+    found = sorted(glob.glob(os.path.join(cfg["PETSC_DIR"], cfg.get("PETSC_ARCH") or "", "lib", "libpetsc*.so*")))
+    if not found:
+        return None
+    fn = ctypes.CDLL(found[0]).PetscOptionsUsed
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int)]
+    return fn
+
+
+def _is_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _option_text(value):
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def validate_options(options):
+    """ConfigError naming the first option PETSc does not use: a 2 x 2 system is solved on this
+    process alone with the options, then PETSc is asked which it read. Called while the scene
+    is checked (implicit scenes only), so a misspelt option stops the run before it writes."""
+    from mpi4py import MPI   # (here, not at the top: the command line's parser imports this module)
+    probe = LinearSolver(MPI.COMM_SELF, options)
+    try:
+        block = np.array([[[2.0, 0.0], [0.0, 2.0]]])
+        one = np.zeros(1, np.int64)
+        probe.set_operator(1, 0, np.zeros(1, np.int64), np.array([0, 1]), np.zeros(1, np.int64), block, one + 1, one)
+        probe.solve(np.ones(2))
+        probe.check_unused()
+    finally:
+        probe.destroy()
+
+
+class LinearSolver:
+    """A KSP on ``comm`` whose operator is rebuilt each step from per-rank blocks.
+
+    Parameters
+    ----------
+    comm : mpi4py communicator
+    options : dict
+        PETSc options (name without the leading dash -> value) over ``DEFAULT_OPTIONS``.
+    """
+
+    def __init__(self, comm, options):
+        self.PETSc = petsc()
+        self.comm = comm
+        self.options = dict(DEFAULT_OPTIONS)
+        self.options.update(options)
+        if comm.Get_size() == 1 and self.options.get("pc_factor_mat_solver_type") == "mumps" \
+                and not self._has_mumps():
+            self.options["pc_factor_mat_solver_type"] = "petsc"
+        db = self.PETSc.Options()
+        for name in list(db.getAll()):   # an earlier scene's options (one process, several runs)
+            if name.startswith(PREFIX):
+                db.delValue(name)
+        for name, value in self.options.items():
+            db.setValue(PREFIX + name, _option_text(value))
+        self.ksp = None
+        self.A = None
+        self._sizes = None
+        self._pattern = None
+        self.iterations = 0
+
+    def _has_mumps(self):
+        return self.PETSc.Mat.SolverType.MUMPS in dir(self.PETSc.Mat.SolverType) or True
+
+    def check_unused(self):
+        """ConfigError for the first option PETSc did not read (a misspelt name, or one that
+        does not apply to the chosen solver): called after the first solve, when every object
+        has read its options. PETSc's PetscOptionsUsed through its shared library (petsc4py
+        3.18 does not wrap it); skipped, with a warning, where the library is not found."""
+        used = _options_used_function()
+        if used is None:
+            logger.warning("cannot ask PETSc which options it used; misspelt [solver.petsc] names go unnoticed")
+            return
+        for name, value in self.options.items():
+            if name in DEFAULT_OPTIONS and DEFAULT_OPTIONS[name] == value:
+                continue
+            flag = ctypes.c_int(0)
+            used(None, (PREFIX + name).encode(), ctypes.byref(flag))
+            if not flag.value:
+                raise ConfigError(f"solver.petsc.{name}", "PETSc did not use this option (unknown name, or "
+                                                          "it does not apply to the chosen solver)")
+
+    def set_operator(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
+        """Build this step's matrix: ``n_owned`` nodes owned here (rows 2 start .. 2 (start +
+        n_owned)), and the blocks this rank assembled in block-CSR form: block rows ``rows``
+        (global node numbers, ghosts included), ``indptr``/``cols`` their column nodes,
+        ``values`` (nnz, 2, 2). ``diag_nnz``/``off_nnz``: blocks per owned row in the owned and
+        the other columns (preallocation)."""
+        PETSc = self.PETSc
+        pattern = (rows.copy(), indptr.copy(), cols.copy())
+        same = self.A is not None and self._sizes[0][0] == 2 * n_owned and all(
+            a.shape == b.shape and np.array_equal(a, b) for a, b in zip(pattern, self._pattern))
+        if self.comm.allreduce(0 if same else 1) == 0:   # every rank, or none
+            # the same blocks as the last matrix (the iterations of one step): new values only,
+            # so the factorisation reuses its analysis (MUMPS) or its symbolic part (PETSc's LU)
+            self.A.zeroEntries()
+            self.A.setValuesBlockedIJV(indptr.astype(PETSc.IntType), cols.astype(PETSc.IntType),
+                                       values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES,
+                                       rowmap=rows.astype(PETSc.IntType))
+            self.A.assemblyBegin()
+            self.A.assemblyEnd()
+            self.ksp.setOperators(self.A)
+            return
+        self._pattern = pattern
+        A = PETSc.Mat().create(comm=self.comm)
+        A.setSizes(((2 * n_owned, PETSc.DETERMINE), (2 * n_owned, PETSc.DETERMINE)), bsize=2)
+        A.setType(PETSc.Mat.Type.AIJ)
+        A.setOptionsPrefix(PREFIX)
+        A.setFromOptions()
+        d = np.repeat(2 * diag_nnz, 2).astype(PETSc.IntType)
+        o = np.repeat(2 * off_nnz, 2).astype(PETSc.IntType)
+        A.setPreallocationNNZ((d, o))
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        A.setValuesBlockedIJV(indptr.astype(PETSc.IntType), cols.astype(PETSc.IntType),
+                              values.reshape(-1), addv=PETSc.InsertMode.ADD_VALUES,
+                              rowmap=rows.astype(PETSc.IntType))
+        A.assemblyBegin()
+        A.assemblyEnd()
+        if self.A is not None:
+            self.A.destroy()
+        self.A = A
+        if self.ksp is not None and self._sizes != A.getSizes():
+            # the active nodes changed: a new solver (a reset KSP keeps sub-solvers, e.g. the
+            # multigrid levels, of the old size)
+            self.ksp.destroy()
+            self.ksp = None
+        if self.ksp is None:
+            self.ksp = PETSc.KSP().create(comm=self.comm)
+            self.ksp.setOptionsPrefix(PREFIX)
+        self._sizes = A.getSizes()
+        self.ksp.setOperators(A)
+        self.ksp.setFromOptions()
+        self.x, self.b = A.createVecs()
+
+    def solve(self, rhs):
+        """The owned part of A^-1 rhs (``rhs``: this rank's owned rows). Raises
+        ``ArithmeticError`` when the Krylov solver reports divergence."""
+        self.b.array[:] = rhs
+        self.ksp.solve(self.b, self.x)
+        reason = self.ksp.getConvergedReason()
+        self.iterations += max(self.ksp.getIterationNumber(), 1)
+        if reason < 0:
+            raise ArithmeticError(f"the linear solver diverged (KSP reason {reason})")
+        return self.x.array.copy()
+
+    def destroy(self):
+        for obj in (self.ksp, self.A):
+            if obj is not None:
+                obj.destroy()
+        self.ksp = self.A = None

@@ -1,0 +1,177 @@
+"""One implicit step's equations on a rank's grid window: the residual, the tangent and the
+linear solve that Newton's method (pmpm.core.implicit.newton) iterates.
+
+    R(u) = f_ext(t + dt) + f_int(u) - M a_{n+1}(u)          (dynamics; statics: no M term)
+    -dR/du = K_mat + K_geo + M / (beta dt^2)
+
+f_int and K come from the particles (pmpm.core.implicit.kernels) with the stresses the
+materials compute from the step-start state for the trial increment (never accumulated over
+iterations: the start state is copied once, each trial starts from the copy). Components
+held by a boundary condition are eliminated (rows and columns), their increment is the
+prescribed one. The halo sums make every rank's residual complete on its owned nodes; the
+tangent's ghost rows are summed by PETSc.
+"""
+import logging
+
+import numpy as np
+
+from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.dofs import StepDofs, blocks_to_csr
+
+__all__ = ["GridProblem"]
+logger = logging.getLogger(__name__)
+
+
+class GridProblem:
+    """The equations of one step of length ``rule.dt`` (``rule`` None: statics).
+
+    Parameters
+    ----------
+    s : pmpm.core.solver.Solver
+        Its particles, materials, window and decomposition (read; the particles are not
+        changed here).
+    linear : pmpm.core.implicit.linear_solver.LinearSolver
+    rule : pmpm.core.implicit.newmark.Newmark or None
+    fext : ndarray (nx, ny, 2)
+        External nodal forces at the step's end (halo-summed).
+    v, a : ndarray (nx, ny, 2) or None
+        Nodal velocity and acceleration at the step's start (dynamics).
+    fext_start : ndarray (nx, ny, 2), optional
+        External nodal forces at the step's start (HHT-alpha only: its residual weighs the
+        start's forces by -alpha).
+    """
+
+    def __init__(self, s, linear, rule, fext, v, a, fext_start=None):
+        self.s, self.linear, self.rule = s, linear, rule
+        w, g = s.window, s.grid
+        self.mass = w.G[..., 0]
+        held = w.bc_mask.astype(bool)
+        self.dofs = StepDofs(self.mass, s.mass_cutoff, held, s._owned_local, s.decomp,
+                             IK.stencil_span(s.shape))
+        self.fext, self.v, self.a = fext, v, a
+        self.alpha = rule.alpha if rule is not None else 0.0
+        self.fext_start = fext_start
+        self.geometry = (w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
+        p = s.particles
+        self.x = p["x"]
+        self.vol = p["vol"]
+        self.stress0 = p["stress"].copy()
+        self.state0 = [{name: (p[name].copy() if p.fields.get(name) is not None else None)
+                        for name in m.state_fields} for m in s.materials]
+        n = p.n
+        self.f = np.empty((n, 4))
+        self.E = np.empty((n, 3))
+        self.D = np.empty((n, 3, 3))
+        self.free = ~self.dofs.held[self.dofs.owned_active].reshape(-1)
+        self.evaluations = 0
+        self.factorisations = 0
+        self._evaluated = None
+        self.force_scale = 0.0
+        self.force_scale = self._start_force_scale()
+
+    # -- the state of a trial increment ----------------------------------------------------
+    def evaluate(self, u):
+        """f, E and the trial stresses S and material states of the increment ``u`` (kept:
+        the tangent at the u whose residual was just computed reuses them)."""
+        if self._evaluated is not None and np.array_equal(self._evaluated, u):
+            return
+        self._evaluated = u.copy()
+        IK.deformation_increment(self.x, u, *self.geometry, self.f, self.E)
+        p = self.s.particles
+        self.S = self.stress0.copy()
+        self.state = [{k: (v.copy() if v is not None else None) for k, v in st.items()} for st in self.state0]
+        several = len(self.s.materials) > 1
+        for k, m in enumerate(self.s.materials):
+            m.update_stress(self.S, self.E, self.state[k], p["mat"], k if several else -1)
+        self.evaluations += 1
+
+    def internal_force(self, u):
+        """Halo-summed f_int (nx, ny, 2) of the increment ``u`` (evaluates it)."""
+        self.evaluate(u)
+        R = np.zeros(self.mass.shape + (2,))
+        IK.internal_force(self.x, self.vol, self.S, self.f, R, *self.geometry)
+        self.s.decomp.sum_halo(R)
+        return R
+
+    def _start_force_scale(self):
+        """The norm of the internal and external forces at the step's start (u = 0); keeps
+        the start's total force F_n for HHT-alpha."""
+        fint0 = self.internal_force(np.zeros(self.mass.shape + (2,)))
+        if self.alpha:
+            self.force_start = fint0 + self.fext_start
+        fi = self.dofs.owned_values(fint0)
+        fe = self.dofs.owned_values(self.fext)
+        return float(np.sqrt(self.s.decomp.allreduce_sum(
+            float(np.dot(fi[self.free], fi[self.free]) + np.dot(fe[self.free], fe[self.free])))))
+
+    def residual(self, u):
+        """(owned residual vector with held components zero, its global 2-norm)."""
+        R = self.internal_force(u)
+        R += self.fext
+        if self.alpha:   # HHT: the forces at n + 1 + alpha
+            R *= 1.0 + self.alpha
+            R -= self.alpha * self.force_start
+        if self.rule is not None:
+            R -= self.mass[..., None] * self.rule.acceleration(u, self.v, self.a)
+        r = self.dofs.owned_values(R)
+        r[~self.free] = 0.0
+        return r, float(np.sqrt(self.s.decomp.allreduce_sum(float(np.dot(r, r)))))
+
+    # -- the linear algebra -------------------------------------------------------------------
+    def tangent(self, u):
+        """Assemble K at ``u`` (materials' tangents at the trial state) and hand it to PETSc."""
+        self.evaluate(u)
+        p, d = self.s.particles, self.dofs
+        several = len(self.s.materials) > 1
+        for k, m in enumerate(self.s.materials):
+            m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
+                      k if several else -1)
+        span = d.span
+        Kb = np.zeros((d.n_local, span * span, 2, 2))
+        IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, d.lid, Kb, *self.geometry)
+        if self.alpha:
+            Kb *= 1.0 + self.alpha
+        diag = self._diagonal(Kb)
+        node_i, node_j = np.nonzero(d.active)
+        nb = int(np.count_nonzero(np.any(Kb != 0.0, axis=(2, 3)))) + d.n_local
+        rows = np.empty(d.n_local, np.int64)
+        indptr = np.empty(d.n_local + 1, np.int64)
+        cols = np.empty(nb, np.int64)
+        vals = np.empty((nb, 2, 2))
+        nrows, nnz = blocks_to_csr(Kb, d.lid, node_i, node_j, d.gid, d.held, diag, d.row_owned, span,
+                                   rows, indptr, cols, vals)
+        self.linear.set_operator(d.n_owned, d.start, rows[:nrows], indptr[:nrows + 1], cols[:nnz],
+                                 vals[:nnz], d.diag_nnz, d.off_nnz)
+        self.factorisations += 1
+
+    def _diagonal(self, Kb):
+        """What the owned nodes' diagonals receive: the mass term m / (beta dt^2), and on a held
+        component a positive stand-in of the row's scale (its own stiffness or mass term)."""
+        d = self.dofs
+        m = self.mass[d.active]
+        diag = np.zeros((d.n_local, 2))
+        if self.rule is not None:
+            diag += (self.rule.mass_factor * m)[:, None]
+        centre = (d.span * d.span) // 2
+        stiff = np.abs(np.stack([Kb[:, centre, 0, 0], Kb[:, centre, 1, 1]], axis=1))
+        held = d.held[d.active]
+        stand_in = np.where(stiff + diag > 0.0, stiff + diag, 1.0)
+        return np.where(held, stand_in, diag)
+
+    def solve(self, r):
+        return self.linear.solve(r)
+
+    def dot(self, a, b):
+        return float(self.s.decomp.allreduce_sum(float(np.dot(a, b))))
+
+    def add(self, u, du, step):
+        """u + step du on the window (the correction's ghost values from their owners)."""
+        W = np.empty_like(u)
+        self.dofs.to_window(du, W)
+        self.s.decomp.fill(W)
+        return u + step * W
+
+    def held_increment(self, dt):
+        """The prescribed increments of the held components (dt times the prescribed velocity)."""
+        w = self.s.window
+        return np.where(self.dofs.held, dt * w.bc_vel, 0.0)

@@ -1,0 +1,271 @@
+"""The implicit integrator as a scheme: one call of ``advance(solver, dt)`` is one step of the
+scene's ``solver.time_step``, read top to bottom as the solver's phases and this package's:
+
+    reset_grid -> particles_to_grid (mass, momentum) -> inertia and loads to the grid
+    -> exchange_halo -> [Newton: residual -> tangent -> PETSc solve -> line search]
+    -> particles from the converged step (Newmark) -> stresses, volumes pushed forward
+
+A step whose Newton iterations fail is halved and retried from the same start state (the
+particles are only written once a step has converged); after ``GROW_AFTER`` converged steps
+the step doubles again, up to the scene's. A step that fails at the smallest length allowed
+(``max_halvings``) stops the run (UnstableRunError: exit 3, the last converged state kept).
+Statics (``solver.analysis = "static"``) is the same loop without the inertia: each step
+brings the loads of its end time (load control) to equilibrium and the velocities stay zero.
+
+The class here is registered in pmpm.core.schemes as ``newmark``; the scene selects it with
+``solver.integrator = "implicit"`` (pmpm.core.implicit.options).
+"""
+import logging
+
+import numpy as np
+
+from pmpm.core import kernels as K
+from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.linear_solver import LinearSolver
+from pmpm.core.implicit.newmark import Newmark
+from pmpm.core.implicit.newton import NewtonFailed, newton
+from pmpm.core.implicit.options import IMPLICIT_DEFAULTS
+from pmpm.core.implicit.problem import GridProblem
+from pmpm.errors import ConfigError, UnstableRunError
+
+__all__ = ["ImplicitNewmark", "GROW_AFTER", "ACCELERATION"]
+logger = logging.getLogger(__name__)
+
+#: converged steps after a halving before the step doubles again
+GROW_AFTER = 4
+#: the particle field holding Newmark's acceleration (migrates with the particle)
+ACCELERATION = "acc"
+#: grid fields the step reads after the halo sum: mass, momentum, external force, m a
+MASS, MOMENTUM, FORCE, INERTIA = 0, slice(1, 3), slice(3, 5), slice(5, 7)
+
+
+class ImplicitNewmark:
+    """Newmark's average acceleration rule with Newton iterations on the grid (docs/implicit.md)."""
+
+    name = "newmark"
+
+    def __init__(self, options=None, analysis="dynamic", petsc=None):
+        self.options = dict(IMPLICIT_DEFAULTS if options is None else options)
+        self.dynamic = analysis == "dynamic"
+        self.petsc = dict(petsc or {})
+        self.alpha = self.options["hht_alpha"]
+        self.linear = None
+        self.fraction = 1.0        # current step length / the scene's step
+        self.converged_in_row = 0
+        self.stats = {"steps": 0, "newton_iterations": 0, "residual_evaluations": 0,
+                      "linear_iterations": 0, "halvings": 0}
+        self.history = []          # (|R|, energy) of the last step's iterations
+        self.held_force = np.zeros(2)   # sum of the nodal forces on held components (last step)
+        self.options_checked = False
+
+    @classmethod
+    def from_config(cls, cfg):
+        """The integrator with the scene's ``[solver.implicit]`` tolerances, ``solver.analysis``
+        and ``[solver.petsc]`` options (``cfg``: the scene's ``[solver]`` settings; the solver
+        holds no scene)."""
+        return cls(cfg.implicit, cfg.analysis, cfg.petsc)
+
+    def check_parts(self, effects, transfer, grid_fields):
+        """Refuse every part of the run that does not say ``implicit_support`` (the effects,
+        the transfer, the grid fields: pmpm.core.effects): this step calls none of the
+        explicit step's hooks, so a part it does not carry would be silently left out.
+        What is not a part of the solver (checkpoints, output fields, the materials'
+        tangents, the time step) is refused with the scene (pmpm.core.implicit.options)."""
+        for effect in effects:
+            if not effect.implicit_support:
+                what = "; ".join(effect.describe()) or effect.name
+                raise ConfigError(effect.name, f"is explicit-only for now ({what}; solver.integrator = "
+                                               f"\"implicit\", docs/implicit.md)")
+        if not transfer.implicit_support:
+            raise ConfigError("solver.transfer", f"{transfer.name}" + (f" with pic_blend = {transfer.pic_blend:g}"
+                              if transfer.pic_blend else "") + ": the implicit step updates velocities by "
+                              "Newmark's rule (solver.integrator = \"implicit\")")
+        if not grid_fields.implicit_support:
+            raise ConfigError(grid_fields.scene_key, "is explicit-only for now (solver.integrator = \"implicit\", "
+                                         "docs/implicit.md)")
+
+    # -- one scene step, in as many sub-steps as Newton needs ------------------------------
+    def advance(self, s, dt):
+        self._start(s)
+        done, halvings = 0.0, 0
+        while done < dt * (1.0 - 1e-12):
+            h = min(dt * self.fraction, dt - done)
+            try:
+                self.substep(s, h, s.t + done)
+            except NewtonFailed as exc:
+                halvings += 1
+                self.stats["halvings"] += 1
+                if self.fraction * 0.5 < 0.5 ** self.options["max_halvings"]:
+                    raise UnstableRunError(
+                        f"Newton's method did not converge at t = {s.t + done:.6g} s with the smallest step "
+                        f"allowed, {h:.3g} s ({exc}); solver.implicit.max_halvings = "
+                        f"{self.options['max_halvings']}") from None
+                self.fraction *= 0.5
+                self.converged_in_row = 0
+                if s.decomp.rank == 0:
+                    logger.info("t = %.6g s: Newton failed (%s); step halved to %.3g s", s.t + done, exc,
+                                dt * self.fraction)
+                continue
+            done += h
+            self.converged_in_row += 1
+            if self.fraction < 1.0 and self.converged_in_row >= GROW_AFTER:
+                self.fraction = min(1.0, 2.0 * self.fraction)
+                self.converged_in_row = 0
+        if s.t + dt >= s.options.end_time * (1.0 - 1e-12) and s.decomp.rank == 0:
+            st = self.stats
+            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d residual evaluations, "
+                        "%d linear iterations, %d halvings", st["steps"], st["newton_iterations"],
+                        st["newton_iterations"] / max(st["steps"], 1), st["residual_evaluations"],
+                        st["linear_iterations"], st["halvings"])
+
+    def _start(self, s):
+        """First call: the PETSc solver, the options, and Newmark's start accelerations."""
+        if self.linear is not None:
+            return
+        self.linear = LinearSolver(s.comm, self.petsc)
+        if ACCELERATION not in s.particles.fields:
+            s.particles.add_field(ACCELERATION, (2,))
+            if self.dynamic:
+                self.start_accelerations(s)
+
+    # -- phases ------------------------------------------------------------------------------
+    def grid_from_particles(self, s, t_load):
+        """Mass, momentum, m a and the external forces at ``t_load`` on the grid, halo-summed."""
+        p = s.particles
+        s.reset_grid()
+        s.particles_to_grid(momentum=True, forces=False)
+        geometry = s._step_context().geometry   # (G, ox, oy, origin, inv_h, ncx, ncy, shape)
+        IK.scatter_inertia_and_gravity(p["x"], p["m"], p[ACCELERATION] if self.dynamic else None,
+                                       s.gravity, *geometry)
+        _scatter_point_forces(s, t_load, geometry)
+        s.exchange_halo(slice(0, 7))
+
+    def external_forces(self, s, t):
+        """Halo-summed external nodal forces at time ``t`` (weight and point loads), in a
+        window array of their own (HHT-alpha needs the step's start forces too)."""
+        p, w, g = s.particles, s.window, s.grid
+        T = np.zeros(w.G.shape)
+        geometry = (T, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
+        if s.gravity is not None:
+            IK.scatter_inertia_and_gravity(p["x"], p["m"], None, s.gravity, *geometry)
+        _scatter_point_forces(s, t, geometry)
+        F = np.ascontiguousarray(T[..., FORCE])
+        s.decomp.sum_halo(F)
+        return F
+
+    def nodal_start(self, s):
+        """Nodal velocity and acceleration at the step's start (zero off the active nodes);
+        held components take their prescribed velocity and no acceleration."""
+        G = s.window.G
+        m = G[..., MASS]
+        active = (m > s.mass_cutoff)[..., None]
+        safe = np.where(active[..., 0], m, 1.0)[..., None]
+        v = np.where(active, G[..., MOMENTUM] / safe, 0.0)
+        a = np.where(active, G[..., INERTIA] / safe, 0.0)
+        held = s.window.bc_mask.astype(bool)
+        return np.where(held, s.window.bc_vel, v), np.where(held, 0.0, a)
+
+    def start_accelerations(self, s):
+        """Newmark's a_0 = M^-1 (f_ext(t0) + f_int(sigma_0)) on the grid (lumped mass),
+        interpolated to the particles: the start state's own equilibrium, so that a load
+        applied at t = 0 is felt at once."""
+        self.grid_from_particles(s, s.t)
+        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), None, None)
+        zero = np.zeros(s.window.G.shape[:2] + (2,))
+        force = problem.internal_force(zero) + s.window.G[..., FORCE]
+        m = s.window.G[..., MASS]
+        active = (m > s.mass_cutoff)[..., None] & ~s.window.bc_mask.astype(bool)
+        a0 = np.where(active, force / np.where(m > s.mass_cutoff, m, 1.0)[..., None], 0.0)
+        p = s.particles
+        dx = np.empty((p.n, 2))
+        x = p["x"].copy()
+        w, g = s.window, s.grid
+        IK.newmark_particles(x, p["v"].copy(), p[ACCELERATION], zero, zero, a0, w.ox, w.oy, g.origin, g.inv_h,
+                             g.cells[0], g.cells[1], s.shape, dx)
+
+    def substep(self, s, h, t0):
+        """One step of length ``h`` from time ``t0``; raises NewtonFailed (particles untouched)."""
+        self.grid_from_particles(s, t0 + h)
+        rule = Newmark(h, self.alpha) if self.dynamic else None
+        v, a = self.nodal_start(s) if self.dynamic else (None, None)
+        start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
+        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
+        u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
+        u = np.where(problem.dofs.active[..., None], u, 0.0)
+        u = np.where(problem.dofs.held, problem.held_increment(h), u)
+        self.history = []
+        try:
+            iterations = newton(problem, u, self.options, self.history)
+        except ArithmeticError as exc:   # a Krylov solve that diverged counts as a failure
+            raise NewtonFailed(str(exc)) from None
+        finally:
+            self.stats["residual_evaluations"] += problem.evaluations
+            self.stats["linear_iterations"] = self.linear.iterations
+        if not self.options_checked and self.linear.ksp is not None:   # after the first solve
+            self.linear.check_unused()
+            self.options_checked = True
+        self.stats["newton_iterations"] += iterations
+        self.stats["steps"] += 1
+        self.commit(s, problem, u, rule, v, a, t0, h)
+
+    def commit(self, s, problem, u, rule, v, a, t0, h):
+        """The converged increment onto the particles: positions, velocities, accelerations
+        (Newmark, FLIP increments), stresses and states pushed forward, volumes, strains, and
+        the energy bookkeeping the solver's checks read."""
+        p = s.particles
+        R = problem.internal_force(u) + problem.fext     # also leaves S, state of u
+        held = problem.dofs.held & problem.dofs.owned_active[..., None]
+        self.held_force = s.decomp.allreduce_sum(np.where(held, R, 0.0).sum(axis=(0, 1)))
+        w, g = s.window, s.grid
+        dx = s._scratch("_dx_buf", (p.n, 2))
+        if rule is not None:
+            a_new = rule.acceleration(u, v, a)
+            a_new = np.where(problem.dofs.active[..., None], a_new, 0.0)
+            dv = rule.velocity_change(a, a_new)
+            vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
+                                             g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
+        else:
+            vmax, bad = IK.newmark_particles(p["x"], None, None, u, None, None, w.ox, w.oy,
+                                             g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
+        # what grid-to-particles leaves for the solver's end of step (pmpm.core.fields does the
+        # same): the moves, the speed and the count of non-finite particles
+        s._dx = dx
+        s._vmax_local, s._bad_local = vmax, bad
+        self._work(s, problem, t0, h)
+        IK.push_forward(problem.S, problem.f, p["stress"], p["vol"], p.fields.get("strain"), problem.E)
+        for k, m in enumerate(s.materials):
+            for name in m.state_fields:
+                new = problem.state[k][name]
+                if new is None:
+                    continue
+                if name in m.tensor_state_fields:
+                    IK.push_forward(new, problem.f, new, None, None, problem.E)
+                mine = p["mat"] == k if len(s.materials) > 1 else slice(None)
+                p[name][mine] = new[mine]
+        s._de = problem.E   # the step's strain increment, where the explicit phases leave it
+
+    def _work(self, s, problem, t0, h):
+        """Internal work (trapezoid of the start and trial stresses over the step's strain) and
+        the external work of gravity and the point loads (trapezoid of their start and end
+        values over the particles' moves): the balance the solver's energy check reads."""
+        p = s.particles
+        mean = 0.5 * (problem.stress0[:, :3] + problem.S[:, :3])
+        s.internal_work += float(np.sum(p["vol"] * np.einsum("pk,pk->p", mean, problem.E)))
+        if s.gravity is not None:
+            s.external_work += float(np.sum(p["m"] * (s._dx @ s.gravity)))
+        loads = s.effect("loads")
+        for t in (t0, t0 + h):
+            point = loads.point_forces(p, t) if loads is not None else None
+            if point is not None:
+                idx, load_id, load_w, load_vec = point
+                s.external_work += 0.5 * K.point_load_work(idx, s._dx, load_id, load_w, load_vec)
+
+
+def _scatter_point_forces(s, t, geometry):
+    """The force sets of the ``loads`` effect at time ``t`` onto the window array of
+    ``geometry`` (none without the effect or without force sets)."""
+    loads = s.effect("loads")
+    point = loads.point_forces(s.particles, t) if loads is not None else None
+    if point is not None:
+        idx, load_id, load_w, load_vec = point
+        K.scatter_point_loads(idx, s.particles["x"], load_id, load_w, load_vec, *geometry)
