@@ -16,6 +16,7 @@ import os
 import sys
 import time
 
+import h5py
 import numpy as np
 
 from decomposition import alltoallv_fields
@@ -27,7 +28,7 @@ from pmpm.errors import ConfigError, OutputWriteError, ParticleExitError, Unstab
 from pmpm.io import OutputFile, read_checkpoint, write_checkpoint
 from pmpm.io.checkpoint import _next_slot, _write_reason, checkpoint_paths, lastgood_path
 from pmpm.io.ownership import (ForeignFileError, check_manifest, check_owned, claim_run, protect_input,
-                               release_claims, remove_owned)
+                               release_claims, remove_owned, remove_stale_temporaries)
 from pmpm.io.tracking import HISTORY_COLUMNS, Tracker
 from pmpm.io.validate import safe_to_open_hdf5
 from pmpm.results.recorder import UNITS, StructuralRecorder
@@ -94,6 +95,44 @@ def _owner(path):
 
 #: bytes left free beyond a write's estimate (HDF5 metadata, the history rows, the XDMF file)
 DISK_MARGIN = 64 * 1024
+
+
+def _extendable_chunk_bytes(h5file, rows):
+    """Bytes of the chunks that the next frame may allocate in an open results file: one row
+    more in each dataset of ``frames/``, ``rows`` more in every other growing table (HDF5
+    allocates a chunk when a dataset is extended into it). Reads metadata only; called on every
+    rank of a file open with the mpio driver (rank 0 alone hung opening its datasets)."""
+    total = 0
+
+    def add(name, obj):
+        nonlocal total
+        if isinstance(obj, h5py.Dataset) and obj.chunks and obj.maxshape and obj.maxshape[0] is None:
+            n, c = obj.shape[0], obj.chunks[0]
+            grow = 1 if name.startswith("frames/") else rows
+            new_chunks = -(-(n + grow) // c) - (-(-n // c))
+            total += new_chunks * int(np.prod(obj.chunks, dtype=np.int64)) * obj.dtype.itemsize
+
+    h5file.visititems(add)
+    return total
+
+
+def _over_file_size_limit(path, nbytes, replaces=None):
+    """The reason a write of about ``nbytes`` to ``path`` would pass the process's file size
+    limit (``ulimit -f``, RLIMIT_FSIZE), or None. Python ignores SIGXFSZ, so such a write fails
+    with EFBIG inside HDF5, which then cannot close its file (libhdf5 crashed closing it here):
+    the write is refused before it starts, as for a full disk. A file that ``replaces`` names
+    is written afresh; any other grows by ``nbytes``."""
+    import resource
+    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if limit == resource.RLIM_INFINITY:
+        return None
+    size = nbytes + DISK_MARGIN
+    if not replaces and os.path.exists(path):
+        size += os.path.getsize(path)
+    if size > limit:
+        return (f"File too large: about {size} bytes, over the file size limit of {limit} bytes "
+                f"(ulimit -f)")
+    return None
 
 
 class _quiet_h5py_deallocs:
@@ -237,12 +276,19 @@ class Run:
             raise OutputWriteError(*failed[0])
         return result
 
-    def _ensure_space(self, path, nbytes, replaces=None):
+    def _ensure_space(self, path, nbytes, replaces=None, frame=False):
         """Refuse (every rank, OutputWriteError) a write of about ``nbytes`` that the file
         system of ``path`` cannot hold, before HDF5 starts it: HDF5 does not recover from a
         write cut short by a full disk (its files cannot even be closed cleanly), while a
-        refused write leaves every file as it was. ``replaces``: a file the write truncates."""
+        refused write leaves every file as it was. ``replaces``: a file the write truncates;
+        ``frame``: the write is a frame and its history rows (their tables' new chunks count).
+        The file size limit (``ulimit -f``) is checked alike."""
         short = None
+        if frame and self.output is not None and self.output.file is not None:
+            # a frame of the results file (called on every rank alike): the tables that grow with the frame (histories, energies, sections) take a new
+            # chunk when they cross one (241 kB at once for the bar's first rows); every rank
+            # walks the file (opening its objects is collective under the mpio driver)
+            nbytes += _extendable_chunk_bytes(self.output.file, len(self.history_t) + 1)
         if self.rank == 0:
             import shutil
             try:
@@ -251,6 +297,8 @@ class Run:
                     free += os.path.getsize(replaces)
                 if free < nbytes + DISK_MARGIN:
                     short = f"No space left on device: about {nbytes + DISK_MARGIN} bytes needed, {free} free"
+                else:
+                    short = _over_file_size_limit(path, nbytes, replaces)
             except OSError as exc:
                 short = exc.strerror or type(exc).__name__
         short = self.comm.bcast(short)
@@ -320,6 +368,8 @@ class Run:
                 os.makedirs(os.path.dirname(self.path) or ".", exist_ok=True)
                 # this run's names claimed before any is written: a second run of them is refused
                 claim_run(os.path.dirname(self.path) or ".", run_name(self.scene))
+                for name in remove_stale_temporaries(os.path.dirname(self.path) or ".", run_name(self.scene)):
+                    logger.info("removed %s, a temporary of a killed run", name)
             except ForeignFileError as exc:
                 problem = (exc.key, exc.reason)
             except OSError as exc:
@@ -517,7 +567,7 @@ class Run:
     def write_frame(self):
         if self.output:
             p = self.solver.particles
-            self._ensure_space(self.path, self.solver.n_total * self._row_bytes(self._frame_fields()))
+            self._ensure_space(self.path, self.solver.n_total * self._row_bytes(self._frame_fields()), frame=True)
             self._guard(self.path, self.output.write_frame, self.solver.t, self.solver.step_count,
                         {f: p[f] for f in self._frame_fields()})
             self._guard(self.path, self.flush_history)
@@ -610,6 +660,8 @@ class Run:
             if out.progress_interval and now - last_progress >= out.progress_interval:
                 last_progress = now
                 self.progress(now - wall0, t_start)
+        if self.output is not None:
+            self._ensure_space(self.path, 0, frame=True)  # the last rows' chunks
         self._guard(self.path, self.flush_history)
         wall = time.perf_counter() - wall0
         self.progress(wall, t_start)

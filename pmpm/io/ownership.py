@@ -32,7 +32,8 @@ from pmpm.io.validate import safe_to_open_hdf5
 
 __all__ = ["OWNER_ATTR", "MANIFEST", "ForeignFileError", "check_owned", "hdf5_owner",
            "xdmf_marker", "writing", "claim", "remove_owned", "protect_input", "check_target",
-           "exclusive_temp", "replace_into", "check_manifest", "claim_run", "release_claims"]
+           "exclusive_temp", "replace_into", "check_manifest", "claim_run", "release_claims",
+           "remove_stale_temporaries"]
 
 #: root attribute of every HDF5 file pmpm writes: the stem of the scene file
 OWNER_ATTR = "pmpm_owner"
@@ -344,6 +345,32 @@ def claim_run(folder, run):
         _CLAIMS.add(path)
         return path
     raise ForeignFileError(path, "another pmpm run took this claim at the same moment")
+
+
+#: the temporaries pmpm creates beside a file: checkpoint.py's ``.<name>.<12 hex>.pmpm-tmp`` and
+#: replace_into's ``.<name>.<mkstemp's 8 characters>.pmpm-tmp``
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?:[0-9a-f]{12}|[a-z0-9_]{8})\.pmpm-tmp")
+
+
+def remove_stale_temporaries(folder, run):
+    """Remove the temporaries of run ``run`` that a killed process left in ``folder`` (a
+    checkpoint killed between its write and its rename leaves a whole hidden file the size of
+    the particle state). Only while this process holds the run's claim (no other live run of
+    these names can be writing them), only names of this run's own files (``<run>.*``), only
+    regular files of this user (never through a link). Returns the names removed."""
+    removed = []
+    if _holder(os.path.join(folder, f".{run}.pmpm-claim")) != (os.getpid(), socket.gethostname()):
+        return removed  # not this process's claim: another run's temporaries may be live
+    for entry in os.scandir(folder):
+        m = _TEMPORARY.fullmatch(entry.name)
+        if not m or not m.group("name").startswith(run + "."):
+            continue
+        st = entry.stat(follow_symlinks=False)
+        if stat.S_ISREG(st.st_mode) and st.st_uid == os.getuid():
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(entry.path)
+                removed.append(entry.name)
+    return removed
 
 
 def release_claims():

@@ -12,8 +12,12 @@ rename; a restart's checkpoint goes to a temporary too, so both earlier checkpoi
 Shown to fail (scratch edits, restored): with pmpm.io.ownership.replace_into writing in place
 instead of into a temporary, the expand case lost the earlier out.toml; with Writes.abort not
 putting back the old copies it had set aside, the plot case lost the earlier PNGs.
-(RLIMIT_FSIZE was tried first: it stops Open MPI's PMIx at MPI_Init and,
-set after it, gives EFBIG where libhdf5 then crashes while closing; a tmpfs is the real thing.)
+A file size limit (``ulimit -f``, RLIMIT_FSIZE) is the other way a write is cut short: set
+before MPI_Init it stops Open MPI's PMIx (nothing pmpm can do), set after it a write past it
+fails with EFBIG inside HDF5, which then crashed closing the file (a segmentation fault). pmpm
+refuses such a write before it starts, as for a full disk; the last test sets the limit after
+MPI_Init and was shown to fail (exit -11, libhdf5's H5F__close_cb) before
+pmpm.runner._over_file_size_limit existed.
 """
 import hashlib
 import os
@@ -134,3 +138,27 @@ def test_expand_onto_a_full_disk_keeps_the_earlier_file(disk):
     line = _one_line(_pmpm(disk, "expand", "frame.toml", "--variant", "elastic", "-o", "out.toml"))
     assert "out.toml" in line and "No space left on device" in line, line
     assert _sums(disk) == before
+
+
+@pytest.mark.parametrize("limit", [200_000, 330_000])
+def test_a_run_past_the_file_size_limit_says_one_line(tmp_path, limit):
+    # the bar's results file grows to 366 kB; the limits cut it after its first frame (which
+    # allocates the tables' first chunks, 241 kB) and after its fourth
+    (tmp_path / "bar.toml").write_text(BAR.format(max_steps=""))
+    code = ("import resource, sys\n"
+            "from mpi4py import MPI  # MPI_Init first: PMIx itself needs larger files\n"
+            f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, resource.RLIM_INFINITY))\n"
+            "from pmpm.cli import main\n"
+            "sys.exit(main(['bar.toml', '-q', '--no-plots']))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300, env=dict(os.environ, PYTHONPATH=ROOT))
+    line = _one_line(r)
+    assert "File too large" in line and "bar.h5" in line, line
+    out = tmp_path / "bar_results" / "bar.h5"
+    assert 0 < os.path.getsize(out) <= limit
+    # the frames written before the refused one still read
+    import h5py
+    from pmpm.io import check_results_file
+    check_results_file(str(out))
+    with h5py.File(out, "r") as f:
+        assert len(f["frames"]) >= 1

@@ -175,3 +175,6 @@ def test_a_run_killed_at_a_checkpoint_restarts_on_another_rank_count(tmp_path, u
     r = _mpirun(second, ["bar.toml", "--restart", "bar_results/bar.h5"], folder)
     assert r.returncode == 0, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
     _assert_same_run(str(folder / "bar_results" / "bar.h5"), uninterrupted)
+    # the killed checkpoint's temporary is gone with the run that claimed its names again
+    # (without pmpm.io.ownership.remove_stale_temporaries the ``during`` cases keep it)
+    assert not [n for n in os.listdir(folder / "bar_results") if n.endswith(".pmpm-tmp")]
