@@ -257,6 +257,21 @@ def run_case(args):
             for scene in scenes:  # a load box that catches several bodies is said, not refused
                 for line in load_box_report(scene):
                     print(line)
+            # each run built as it would start (on this rank alone): its size and time step,
+            # the memory and time-step checks, and the effects it switches on
+            from pmpm.build import build_solver
+            from pmpm.runner import describe_effects
+            from pmpm.scene.names import run_name
+            for scene in scenes:
+                try:
+                    solver = build_solver(scene, MPI.COMM_SELF)
+                except ConfigError as exc:
+                    return _bad_input(exc, args.case, rank)
+                print(f"{run_name(scene)}: {solver.n_total} particles, grid {solver.grid.cells[0]} x "
+                      f"{solver.grid.cells[1]} cells of {solver.grid.h:g}, {scene.solver.integrator} "
+                      f"integrator, dt {solver.dt:.3g} s, end {scene.solver.end_time:g} s")
+                for line in describe_effects(scene, solver):
+                    print(f"  effect on: {line}")
         return 0
     if args.restart and len(scenes) > 1:
         return _fail(f"{args.case}: --restart needs --variant (the scene has {len(scenes)} variants)",

@@ -116,6 +116,22 @@ def _extendable_chunk_bytes(h5file, rows):
     return total
 
 
+def describe_effects(scene, s):
+    """The optional physics ``scene`` switches on in its solver ``s`` (nothing else is compiled
+    in): the run header's ``effect on:`` lines, and ``pmpm --check``'s."""
+    out = [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
+    if scene.solver.large_rotations:
+        rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[scene.solver.objective_rate]
+        out.append(f"large rotations ({rate} stress rate)" if s.rotates_stress else
+                   "large rotations: no stress rotation (every material computes its stress from F)")
+    if s.keeps_F:
+        out.append("deformation gradient F per particle")
+    out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
+    out += s.transfer.describe()
+    out += s.grid_fields.describe()   # contact
+    return list(dict.fromkeys(out))   # once each (several materials share a model)
+
+
 def _over_file_size_limit(path, nbytes, replaces=None):
     """The reason a write of about ``nbytes`` to ``path`` would pass the process's file size
     limit (``ulimit -f``, RLIMIT_FSIZE), or None. Python ignores SIGXFSZ, so such a write fails
@@ -594,18 +610,7 @@ class Run:
 
     def effects(self):
         """The optional physics this scene switches on (nothing else is compiled in)."""
-        s = self.solver
-        out = [f"plasticity ({m.name})" for m in s.materials if "plastic_work" in m.state_fields]
-        if self.scene.solver.large_rotations:
-            rate = {"jaumann": "Jaumann", "green_naghdi": "Green-Naghdi"}[self.scene.solver.objective_rate]
-            out.append(f"large rotations ({rate} stress rate)" if s.rotates_stress else
-                       "large rotations: no stress rotation (every material computes its stress from F)")
-        if s.keeps_F:
-            out.append("deformation gradient F per particle")
-        out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
-        out += s.transfer.describe()
-        out += s.grid_fields.describe()   # contact
-        return out
+        return describe_effects(self.scene, self.solver)
 
     def execute(self):
         """Step to the end time; returns a summary dict. Raises on failure after saving."""
