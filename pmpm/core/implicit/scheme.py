@@ -20,6 +20,7 @@ import logging
 import numpy as np
 
 from pmpm.core import kernels as K
+from pmpm.core.effects import ConvergedStep
 from pmpm.core.implicit import kernels as IK
 from pmpm.core.implicit.linear_solver import LinearSolver
 from pmpm.core.implicit.newmark import Newmark
@@ -192,7 +193,10 @@ class ImplicitNewmark:
         problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
-        u = np.where(problem.dofs.held, problem.held_increment(h), u)
+        held = problem.held_increment(h)
+        for prescribe in s._hooks["prescribe_increment"]:   # a pushover's nodes: their displacement
+            prescribe(s, t0, h, held)
+        u = np.where(problem.dofs.held, held, u)
         self.history = []
         try:
             iterations = newton(problem, u, self.options, self.history)
@@ -243,6 +247,23 @@ class ImplicitNewmark:
                 mine = p["mat"] == k if len(s.materials) > 1 else slice(None)
                 p[name][mine] = new[mine]
         s._de = problem.E   # the step's strain increment, where the explicit phases leave it
+        if s._hooks["after_implicit_step"]:   # reactions
+            self._report_supports(s, problem, R, a_new if rule is not None else None, t0, h)
+
+    def _report_supports(self, s, problem, R, a_new, t0, h):
+        """The supports' forces on the held components (pmpm.core.effects.ConvergedStep) to the
+        effects that read them: in statics minus the residual of the free equations there
+        (f_int + f_ext); in dynamics m a - (f_int + f_ext) at the step's end, and at its start
+        on this step's grid (the held nodes start with no acceleration, ``nodal_start``)."""
+        held = problem.dofs.held
+        if a_new is None:
+            step = ConvergedStep(t0, h, True, np.where(held, -R, 0.0))
+        else:
+            end = problem.mass[..., None] * a_new - R
+            start = -(problem.fint_start + self.external_forces(s, t0))
+            step = ConvergedStep(t0, h, False, np.where(held, end, 0.0), np.where(held, start, 0.0))
+        for after in s._hooks["after_implicit_step"]:
+            after(s, step)
 
     def _work(self, s, problem, t0, h):
         """Internal work (trapezoid of the start and trial stresses over the step's strain) and
