@@ -10,10 +10,12 @@ cantilever's tip does). Elastic-perfectly-plastic J2 steel (``bilinear_vonmises`
 hardening: its consistent tangent makes Newton quadratic in the elastic range and fast where
 it yields).
 """
-from pmpm.scene.config import parse_scene
+import os
+
+from pmpm.scene.config import parse_scene, read_toml
 
 __all__ = ["column_pushover_scene", "column_tip_stiffness", "column_collapse_load", "COLUMN_B", "COLUMN_L",
-           "COLUMN_E", "COLUMN_NU", "COLUMN_SY"]
+           "COLUMN_E", "COLUMN_NU", "COLUMN_SY", "portal_gravity_data", "portal_pushover_data"]
 
 #: the column: width (m), pushed height (m), steel's E (Pa), nu, yield stress (Pa)
 COLUMN_B, COLUMN_L, COLUMN_E, COLUMN_NU, COLUMN_SY = 0.4, 4.0, 200e9, 0.3, 250e6
@@ -66,3 +68,45 @@ def column_collapse_load(arm=COLUMN_L):
     """The plastic collapse load Mp / arm of the cantilever (one hinge at the base):
     Mp = sigma_y b^2 / 4 of the rectangle (unit thickness)."""
     return COLUMN_SY * COLUMN_B ** 2 / 4 / arm
+
+
+def _portal_data(cell_size, root="."):
+    """cases/portal_pushover.toml's data (the portal frame with its base reactions and cuts) on
+    ``cell_size`` cells, a static implicit run, without checkpoints and plots."""
+    data = read_toml(os.path.join(root, "cases", "portal_pushover.toml"))
+    data["grid"]["cell_size"] = cell_size
+    data["grid"]["cells"] = [int(round(7.1 / cell_size)), int(round(4.2 / cell_size))]
+    for key in ("checkpoint_interval", "deformed_plot"):
+        data["output"].pop(key, None)
+    # the pushed node row on the grid line nearest the beam's axis (3.658 m)
+    y = round(3.658 / cell_size) * cell_size
+    push = next(b for b in data["boundary"] if b["name"] == "push")
+    push["lower"], push["upper"] = [push["lower"][0], y], [push["upper"][0], y]
+    return data
+
+
+def portal_gravity_data(cell_size=0.1, root="."):
+    """The elastic portal under its own weight in one static step (TOML data)."""
+    data = _portal_data(cell_size, root)
+    data.pop("pushover")
+    data["boundary"] = [b for b in data["boundary"] if b["name"] != "push"]
+    data["output"].pop("hysteresis", None)
+    data["materials"]["steel"] = {"type": "linear_elastic", "E": 207e9, "nu": 0.3, "density": 7850.0}
+    data["output"].update(fields=["x", "x0", "stress"], history_interval=1.0)
+    data["loads"] = {"gravity": [0.0, -9.81]}
+    data["solver"] = {"shape_function": "cubic", "integrator": "implicit", "analysis": "static",
+                      "time_step": 1.0, "end_time": 1.0}
+    return data
+
+
+def portal_pushover_data(cell_size=0.05, displacement=0.02, steps=4, material=None, root="."):
+    """cases/portal_pushover.toml pushed ``displacement`` statically in ``steps`` equal steps
+    (pseudo-time 1 s, no ramps), ``material`` (a [materials.steel] table) or the case's."""
+    data = _portal_data(cell_size, root)
+    if material is not None:
+        data["materials"]["steel"] = dict(material)
+    data["pushover"].update(displacement=displacement, duration=1.0, ramp=0.0)
+    data["output"].update(history_interval=1.0 / steps, interval=1.0)
+    data["solver"] = {"shape_function": "cubic", "integrator": "implicit", "analysis": "static",
+                      "time_step": 1.0 / steps, "end_time": 1.0}
+    return data
