@@ -22,10 +22,11 @@ COLUMN_B, COLUMN_L, COLUMN_E, COLUMN_NU, COLUMN_SY = 0.4, 4.0, 200e9, 0.3, 250e6
 
 
 def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_vonmises", sections=True,
-                          petsc=None, implicit=None, checkpoint_interval=None):
+                          petsc=None, implicit=None, checkpoint_interval=None, folder=None, max_steps=None):
     """The column pushed by ``displacement`` (m) at its top in ``steps`` static steps of equal
     displacement (pseudo-time 1 s; no velocity ramp: the profile is linear), with its base
-    reaction, the push's reaction, a section cut at 0.5 m and the top's track."""
+    reaction, the push's reaction, a section cut at 0.5 m and the top's track. ``folder``: the
+    scene's place (its results in ``folder/results``); ``max_steps``: stop after so many."""
     mat = {"type": material, "E": COLUMN_E, "nu": COLUMN_NU, "density": 7850.0}
     if material != "linear_elastic":
         mat.update(yield_stress=COLUMN_SY, hardening=0.0)
@@ -49,11 +50,15 @@ def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_
         data["output"]["section"] = [{"name": "base_cut", "segment": [[-0.3, 0.5], [0.3, 0.5]]}]
     if checkpoint_interval is not None:
         data["output"]["checkpoint_interval"] = checkpoint_interval
+    if max_steps is not None:
+        data["solver"]["max_steps"] = max_steps
     if petsc:
         data["solver"]["petsc"] = dict(petsc)
     if implicit:
         data["solver"]["implicit"] = dict(implicit)
-    return parse_scene(data, "column.toml")
+    if folder is not None:
+        data["output"]["directory"] = "results"
+    return parse_scene(data, os.path.join(folder or ".", "column.toml"))
 
 
 def column_tip_stiffness():
