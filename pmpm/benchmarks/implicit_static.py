@@ -22,14 +22,16 @@ COLUMN_B, COLUMN_L, COLUMN_E, COLUMN_NU, COLUMN_SY = 0.4, 4.0, 200e9, 0.3, 250e6
 
 
 def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_vonmises", sections=True,
-                          petsc=None, implicit=None, checkpoint_interval=None, folder=None, max_steps=None):
+                          petsc=None, implicit=None, checkpoint_interval=None, folder=None, max_steps=None,
+                          axis="auto"):
     """The column pushed by ``displacement`` (m) at its top in ``steps`` static steps of equal
     displacement (pseudo-time 1 s; no velocity ramp: the profile is linear), with its base
     reaction, the push's reaction, a section cut at 0.5 m and the top's track. ``folder``: the
-    scene's place (its results in ``folder/results``); ``max_steps``: stop after so many."""
+    scene's place (its results in ``folder/results``); ``max_steps``: stop after so many;
+    ``axis``: the slabs' axis (``"x"`` cuts the base and the pushed row across slabs)."""
     mat = {"type": material, "E": COLUMN_E, "nu": COLUMN_NU, "density": 7850.0}
     if material != "linear_elastic":
-        mat.update(yield_stress=COLUMN_SY, hardening=0.0)
+        mat.update(yield_stress=COLUMN_SY, hardening=1e-3)
     x_left = -0.6 - COLUMN_B / 2
     data = {"title": "pushed column", "formulation": "plane_stress", "particles_per_cell": 2,
             "grid": {"origin": [x_left, 0.0], "cell_size": h,
@@ -50,6 +52,7 @@ def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_
         data["output"]["section"] = [{"name": "base_cut", "segment": [[-0.3, 0.5], [0.3, 0.5]]}]
     if checkpoint_interval is not None:
         data["output"]["checkpoint_interval"] = checkpoint_interval
+    data["parallel"] = {"axis": axis}
     if max_steps is not None:
         data["solver"]["max_steps"] = max_steps
     if petsc:
@@ -110,6 +113,8 @@ def portal_pushover_data(cell_size=0.05, displacement=0.02, steps=4, material=No
     data = _portal_data(cell_size, root)
     if material is not None:
         data["materials"]["steel"] = dict(material)
+        if material["type"] == "linear_elastic":
+            data["output"]["fields"] = ["x", "x0", "stress"]
     data["pushover"].update(displacement=displacement, duration=1.0, ramp=0.0)
     data["output"].update(history_interval=1.0 / steps, interval=1.0)
     data["solver"] = {"shape_function": "cubic", "integrator": "implicit", "analysis": "static",
