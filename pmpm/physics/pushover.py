@@ -21,6 +21,10 @@ check is the one the capacity curve's file reports: kinetic energy over strain e
 plastic work, which should stay a few per cent (docs/structural_results.md gives the portal's).
 As a rule, ``duration`` of several first periods and ``ramp`` of about one.
 
+Under the implicit integrator (``solver.analysis = "static"`` only) the pushed component is held
+at the profile's displacement in each static step (``prescribe_increment``): displacement control
+with no inertia, so no rate to choose; the time is then only the push's parameter.
+
 The capacity curve itself (base shear from the reactions against the control point's drift)
 is drawn after the run by pmpm.results.capacity.
 """
