@@ -31,7 +31,7 @@ def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_
     ``axis``: the slabs' axis (``"x"`` cuts the base and the pushed row across slabs)."""
     mat = {"type": material, "E": COLUMN_E, "nu": COLUMN_NU, "density": 7850.0}
     if material != "linear_elastic":
-        mat.update(yield_stress=COLUMN_SY, hardening=1e-3)
+        mat.update(yield_stress=COLUMN_SY, hardening=0.0)
     x_left = -0.6 - COLUMN_B / 2
     data = {"title": "pushed column", "formulation": "plane_stress", "particles_per_cell": 2,
             "grid": {"origin": [x_left, 0.0], "cell_size": h,
