@@ -60,7 +60,7 @@ def column_pushover_scene(displacement=0.2, steps=10, h=0.1, material="bilinear_
     if implicit:
         data["solver"]["implicit"] = dict(implicit)
     if folder is not None:
-        data["output"]["directory"] = "results"
+        data["output"]["directory"] = os.path.join(folder, "results")
     return parse_scene(data, os.path.join(folder or ".", "column.toml"))
 
 

@@ -80,12 +80,16 @@ def test_pushover_same_on_any_rank_count():
 def test_restart_on_another_rank_count():
     folder = comm.bcast(tempfile.mkdtemp(prefix="pmpm_implicit_restart_") if comm.rank == 0 else None, root=0)
     try:
-        path = None
+        path = error = None
         if comm.rank == 0:   # the first half alone, ending with a checkpoint
-            half = Run(_scene(checkpoint_interval=0.5, folder=folder, max_steps=6), MPI.COMM_SELF, write=True)
-            half.execute()
-            path = half.path
-        path = comm.bcast(path, root=0)
+            try:
+                half = Run(_scene(checkpoint_interval=0.5, folder=folder, max_steps=6), MPI.COMM_SELF, write=True)
+                half.execute()
+                path = half.path
+            except Exception as exc:   # every rank fails with it rather than wait for rank 0
+                error = f"{type(exc).__name__}: {exc}"
+        path, error = comm.bcast((path, error), root=0)
+        assert error is None, error
         run = Run(_scene(checkpoint_interval=0.5, folder=folder), comm, write=True, restart=path)
         assert abs(run.solver.t - 0.5) < 1e-12
         run.execute()
