@@ -19,9 +19,10 @@ field, checkpointed with them).
 
 Shown to fail on planted bugs (restored): the reactions' owned-node mask dropped in
 Reactions._add_forces (ghost nodes counted by both ranks): test_pushover_same_on_any_rank_count
-fails on 2 ranks (the push's reaction differs by its ghost share); the checkpoint's particle
-fields not restored (the restart's alltoallv skipped: the restarted run starts from the
-undeformed state at t = 0.5): test_restart_on_another_rank_count fails.
+fails on 2 ranks (base 30 %, push 76 % off); the checkpoint's particle fields not restored
+(runner's restore skipping its alltoallv: the restarted run starts from the undeformed state at
+t = 0.5): test_restart_on_another_rank_count fails (shown with the test function called on one
+process: every figure 50-70 % off).
 """
 import os
 import shutil
