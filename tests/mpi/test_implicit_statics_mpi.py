@@ -1,7 +1,7 @@
 """Implicit statics on several ranks (docs/implicit.md): displacement control gives the same
 answer on any rank count, and an implicit run restarts on another rank count.
 
-Run under ``mpirun -n K`` (K = 2, 3): the pushed column (pmpm.benchmarks.implicit_static:
+Run under ``mpirun -n K`` (K = 2, 3, 4: run_tests.sh): the pushed column (pmpm.benchmarks.implicit_static:
 elastic-perfectly-plastic J2; slabs along x, so that the clamped base row and the pushed top
 row cross the slab boundaries and their ghost nodes hold support forces too)
 through its plastic mechanism on COMM_WORLD and, on rank 0, alone; the base and push reactions,
