@@ -36,6 +36,11 @@ What an effect gives the step, in the order of a step (docs/architecture.md draw
 * ``summary(s)``: entries of the run summary at the end (the first fracture of each body).
 * ``implicit_support``: True if the implicit integrator carries the effect (default False:
   refused there, so that a new effect is never silently left out of an implicit step).
+  The implicit step calls none of the hooks above; it has two of its own:
+  ``prescribe_increment(s, t0, h, U)`` (the displacement increments of held components over
+  the step from ``t0`` to ``t0 + h``, written into the window array ``U``: a pushover's nodes)
+  and ``after_implicit_step(s, step)`` (a converged step's nodal support forces,
+  :class:`ConvergedStep`: reactions).
 
 A material can contribute energy terms too (:data:`ENERGY_TERMS`, ``register_energy``): a
 damage model's dissipated energy is one more column without a change here.
@@ -44,7 +49,7 @@ import logging
 
 from pmpm.registry import all_subclasses
 
-__all__ = ["Effect", "EffectList", "EnergyTerm", "ENERGY_TERMS", "register_energy", "energy_terms"]
+__all__ = ["Effect", "EffectList", "ConvergedStep", "EnergyTerm", "ENERGY_TERMS", "register_energy", "energy_terms"]
 logger = logging.getLogger(__name__)
 
 
@@ -153,6 +158,13 @@ class Effect:
     def limit_dt(self, dt, speed, s):
         return dt
 
+    # -- the implicit step's hooks (pmpm.core.implicit.scheme) ------------------------------
+    def prescribe_increment(self, s, t0, h, U):
+        pass
+
+    def after_implicit_step(self, s, step):
+        pass
+
     # -- state and reporting ---------------------------------------------------------------
     def restore(self, s, attrs):
         """After a restart from a checkpoint with ``attrs`` at time ``s.t`` (the energy terms
@@ -168,7 +180,30 @@ class Effect:
 
 #: the hooks the solver calls through ``EffectList.hooks`` (only on effects overriding them)
 HOOKS = ("on_window", "scatter_forces", "before_grid_update", "after_grid_update", "after_grid_velocity",
-         "after_g2p", "after_move", "after_stress_update", "after_step", "limit_dt")
+         "after_g2p", "after_move", "after_stress_update", "after_step", "limit_dt",
+         "prescribe_increment", "after_implicit_step")
+
+
+class ConvergedStep:
+    """What a converged implicit step gives ``after_implicit_step``.
+
+    Parameters
+    ----------
+    t0, h : float
+        The step's start time and length (s).
+    static : bool
+        ``solver.analysis = "static"``: ``support_force`` is an equilibrium state's.
+    support_force : ndarray (nx, ny, 2)
+        The force the supports exert on each held component of the window's active nodes at
+        the step's end (N; zero elsewhere; ghost nodes hold their owners' values).
+    support_force_start : ndarray (nx, ny, 2) or None
+        The same at the step's start, on this step's grid (dynamics: the trapezoid of the two
+        is the supports' impulse over the step under the trapezoidal rule).
+    """
+
+    def __init__(self, t0, h, static, support_force, support_force_start=None):
+        self.t0, self.h, self.static = t0, h, static
+        self.support_force, self.support_force_start = support_force, support_force_start
 
 
 class EffectList:

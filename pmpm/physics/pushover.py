@@ -21,6 +21,10 @@ check is the one the capacity curve's file reports: kinetic energy over strain e
 plastic work, which should stay a few per cent (docs/structural_results.md gives the portal's).
 As a rule, ``duration`` of several first periods and ``ramp`` of about one.
 
+Under the implicit integrator (``solver.analysis = "static"`` only) the pushed component is held
+at the profile's displacement in each static step (``prescribe_increment``): displacement control
+with no inertia, so no rate to choose; the time is then only the push's parameter.
+
 The capacity curve itself (base shear from the reactions against the control point's drift)
 is drawn after the run by pmpm.results.capacity.
 """
@@ -49,6 +53,10 @@ class Pushover(Effect):
     """
 
     name = "pushover"
+    #: statics: the implicit step holds the pushed nodes at their displacement
+    #: (``prescribe_increment``); implicit dynamics is refused with the scene
+    #: (pmpm.core.implicit.options)
+    implicit_support = True
 
     @classmethod
     def create(cls, scene, setup):
@@ -103,6 +111,12 @@ class Pushover(Effect):
 
     def before_grid_update(self, s, t_next):
         self.apply(s.window, t_next)
+
+    def prescribe_increment(self, s, t0, h, U):
+        """The implicit step's held increment of the pushed component: the profile's
+        displacement from ``t0`` to ``t0 + h`` (a static pushover: displacement control, the
+        pushing force the pushed boundary's reaction)."""
+        U[self.nodes[0], self.nodes[1], self.component] = self.displacement_at(t0 + h) - self.displacement_at(t0)
 
     def describe(self):
         return [f"pushover: boundary {self.boundary.name!r} pushed {self.displacement:g} m along "

@@ -194,6 +194,8 @@ class SectionCuts(Effect):
     at construction on the scene's particles; the run's recorder samples them (no step hook)."""
 
     name = "sections"
+    #: read from the particles' stresses at the samples: a converged implicit step's as well
+    implicit_support = True
 
     @classmethod
     def create(cls, scene, setup):

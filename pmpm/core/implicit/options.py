@@ -89,8 +89,8 @@ def _unsupported(scene):
     yield cfg.interpolation != "point", "solver.interpolation", "GIMP and CPDI are explicit-only for now"
     yield cfg.large_rotations, "solver.large_rotations", ("the implicit step is objective by construction "
                                                           "(Green-Lagrange strain of each step); leave it out")
-    yield out.checkpoint_interval is not None, "output.checkpoint_interval", "restart is explicit-only for now"
-    yield out.hysteresis is not None, "output.hysteresis", "is explicit-only for now"
+    yield (scene.pushover is not None and cfg.analysis == "dynamic", "pushover",
+           "is static only under the implicit integrator for now (solver.analysis = \"static\")")
     yield "F" in out.fields, "output.fields", "F is not kept by the implicit step"
 
 

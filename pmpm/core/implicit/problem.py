@@ -97,6 +97,7 @@ class GridProblem:
         """The norm of the internal and external forces at the step's start (u = 0); keeps
         the start's total force F_n for HHT-alpha."""
         fint0 = self.internal_force(np.zeros(self.mass.shape + (2,)))
+        self.fint_start = fint0   # (the supports' forces at the step's start: pmpm.core.implicit.scheme)
         if self.alpha:
             self.force_start = fint0 + self.fext_start
         fi = self.dofs.owned_values(fint0)

@@ -20,7 +20,9 @@ import logging
 import numpy as np
 
 from pmpm.core import kernels as K
+from pmpm.core.effects import ConvergedStep
 from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.control import linear_predictor
 from pmpm.core.implicit.linear_solver import LinearSolver
 from pmpm.core.implicit.newmark import Newmark
 from pmpm.core.implicit.newton import NewtonFailed, newton
@@ -192,7 +194,12 @@ class ImplicitNewmark:
         problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
-        u = np.where(problem.dofs.held, problem.held_increment(h), u)
+        held = problem.held_increment(h)
+        for prescribe in s._hooks["prescribe_increment"]:   # a pushover's nodes: their displacement
+            prescribe(s, t0, h, held)
+        u = np.where(problem.dofs.held, held, u)
+        if not self.dynamic and s._hooks["prescribe_increment"]:   # displacement control
+            u = linear_predictor(problem, u, s.grid.inv_h)
         self.history = []
         try:
             iterations = newton(problem, u, self.options, self.history)
@@ -243,6 +250,25 @@ class ImplicitNewmark:
                 mine = p["mat"] == k if len(s.materials) > 1 else slice(None)
                 p[name][mine] = new[mine]
         s._de = problem.E   # the step's strain increment, where the explicit phases leave it
+        if s._hooks["after_implicit_step"] or s._hooks["prescribe_increment"]:   # reactions, moving supports
+            self._supports(s, problem, u, R, a_new if rule is not None else None, t0, h)
+
+    def _supports(self, s, problem, u, R, a_new, t0, h):
+        """The supports' forces on the held components, to the effects that read them
+        (pmpm.core.effects.ConvergedStep), and their work over the held increments (the
+        trapezoid of the step's start and end forces: a pushover's work, which the energy check
+        counts as external). In statics the force is minus the free equations' residual there
+        (f_int + f_ext); in dynamics m a - (f_int + f_ext); at the step's start on this step's
+        grid (the held nodes start with no acceleration, ``nodal_start``)."""
+        held = problem.dofs.held
+        start = np.where(held, -(problem.fint_start + self.external_forces(s, t0)), 0.0)
+        end = -R if a_new is None else problem.mass[..., None] * a_new - R
+        end = np.where(held, end, 0.0)
+        mine = problem.dofs.owned_active[..., None]
+        s.external_work += float(np.sum(np.where(mine, 0.5 * (start + end) * u, 0.0)))
+        step = ConvergedStep(t0, h, a_new is None, end, None if a_new is None else start)
+        for after in s._hooks["after_implicit_step"]:
+            after(s, step)
 
     def _work(self, s, problem, t0, h):
         """Internal work (trapezoid of the start and trial stresses over the step's strain) and
