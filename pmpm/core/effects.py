@@ -35,7 +35,10 @@ What an effect gives the step, in the order of a step (docs/architecture.md draw
 * ``describe()``: lines of the run header's ``effect on:`` list;
 * ``summary(s)``: entries of the run summary at the end (the first fracture of each body).
 * ``implicit_support``: True if the implicit integrator carries the effect (default False:
-  refused there, so that a new effect is never silently left out of an implicit step).
+  refused there, so that a new effect is never silently left out of an implicit step);
+  ``implicit_term(s)``: what it adds to the implicit step's equations, if anything (a
+  pmpm.core.implicit.terms.ImplicitTerm: forces and tangent blocks, prescribed support motion,
+  its work), None by default.
 
 A material can contribute energy terms too (:data:`ENERGY_TERMS`, ``register_energy``): a
 damage model's dissipated energy is one more column without a change here.
@@ -152,6 +155,10 @@ class Effect:
 
     def limit_dt(self, dt, speed, s):
         return dt
+
+    def implicit_term(self, s):
+        """The effect's part of the implicit step (pmpm.core.implicit.terms), or None."""
+        return None
 
     # -- state and reporting ---------------------------------------------------------------
     def restore(self, s, attrs):

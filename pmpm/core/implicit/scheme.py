@@ -123,6 +123,8 @@ class ImplicitNewmark:
         if self.linear is not None:
             return
         self.linear = LinearSolver(s.comm, self.petsc)
+        # what the effects add to the step (pmpm.core.implicit.terms)
+        self.terms = [t for t in (e.implicit_term(s) for e in s.effects) if t is not None]
         if ACCELERATION not in s.particles.fields:
             s.particles.add_field(ACCELERATION, (2,))
             if self.dynamic:
@@ -170,9 +172,13 @@ class ImplicitNewmark:
         interpolated to the particles: the start state's own equilibrium, so that a load
         applied at t = 0 is felt at once."""
         self.grid_from_particles(s, s.t)
-        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), None, None)
+        v, _ = self.nodal_start(s)
+        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), v, None, None, self.terms)
         zero = np.zeros(s.window.G.shape[:2] + (2,))
         force = problem.internal_force(zero) + s.window.G[..., FORCE]
+        for f in problem.term_start:   # damping of the start velocities
+            if f is not None:
+                force += f
         m = s.window.G[..., MASS]
         active = (m > s.mass_cutoff)[..., None] & ~s.window.bc_mask.astype(bool)
         a0 = np.where(active, force / np.where(m > s.mass_cutoff, m, 1.0)[..., None], 0.0)
@@ -189,10 +195,12 @@ class ImplicitNewmark:
         rule = Newmark(h, self.alpha) if self.dynamic else None
         v, a = self.nodal_start(s) if self.dynamic else (None, None)
         start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
-        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
+        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start, self.terms)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
         u = np.where(problem.dofs.held, problem.held_increment(h), u)
+        for term in self.terms:   # supports that move (ground motion)
+            term.prescribe(s, t0, h, u, None, None)
         self.history = []
         try:
             iterations = newton(problem, u, self.options, self.history)
@@ -222,6 +230,8 @@ class ImplicitNewmark:
             a_new = rule.acceleration(u, v, a)
             a_new = np.where(problem.dofs.active[..., None], a_new, 0.0)
             dv = rule.velocity_change(a, a_new)
+            for term in self.terms:   # the supports' own velocity change and acceleration
+                term.prescribe(s, t0, h, None, dv, a_new)
             vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
         else:
@@ -243,6 +253,8 @@ class ImplicitNewmark:
                 mine = p["mat"] == k if len(s.materials) > 1 else slice(None)
                 p[name][mine] = new[mine]
         s._de = problem.E   # the step's strain increment, where the explicit phases leave it
+        for term in self.terms:
+            term.commit(s, problem, u)
 
     def _work(self, s, problem, t0, h):
         """Internal work (trapezoid of the start and trial stresses over the step's strain) and

@@ -1,0 +1,37 @@
+"""The implicit integrator's dynamic effects give the same answer on any rank count: Rayleigh
+damping (pmpm.physics.rayleigh, its viscous force halo-summed, its matrix term in the ghost
+rows PETSc sums) and ground motion at the supports (pmpm.physics.groundmotion).
+
+Run under ``mpirun -n K``; each test runs a scene on COMM_WORLD and, on rank 0, serially, and
+compares the particles by id to 1e-9 (tests/mpi/test_implicit_mpi.py says why that tolerance).
+Shown to fail on a planted bug (restored): the viscous force's halo sum skipped
+(``s.decomp.sum_halo(F)`` in RayleighImplicit._force): the damped bar differs on 2 ranks.
+"""
+import os
+import sys
+
+import pytest
+from mpi4py import MPI
+
+sys.path.insert(0, os.path.dirname(__file__))
+from test_implicit_mpi import _compare  # noqa: E402
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "unit"))
+from test_implicit_rayleigh import damped_bar  # noqa: E402
+
+comm = MPI.COMM_WORLD
+
+
+@pytest.mark.mpi(min_size=2)
+def test_rayleigh_damped_bar_same_on_any_rank_count():
+    """The bar with 5 % Rayleigh damping in its first two modes, 6 steps of 8 a period."""
+    ok, report, s = _compare(damped_bar(periods=0.75))
+    assert ok, report
+    assert s.decomp.size == comm.Get_size()
+
+
+if __name__ == "__main__":
+    for test in (test_rayleigh_damped_bar_same_on_any_rank_count,):
+        test()
+        if comm.rank == 0:
+            print(test.__name__, "passed on", comm.Get_size(), "ranks")
