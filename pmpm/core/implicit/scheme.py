@@ -194,6 +194,8 @@ class ImplicitNewmark:
         self.grid_from_particles(s, t0 + h)
         rule = Newmark(h, self.alpha) if self.dynamic else None
         v, a = self.nodal_start(s) if self.dynamic else (None, None)
+        for term in self.terms if self.dynamic else ():
+            term.prescribe_start(s, t0, v, a)
         start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
         problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start, self.terms)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
@@ -234,6 +236,8 @@ class ImplicitNewmark:
                 term.prescribe(s, t0, h, None, dv, a_new)
             vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
+            if self.terms:
+                self._support_work(s, problem, u, R, a_new, held)
         else:
             vmax, bad = IK.newmark_particles(p["x"], None, None, u, None, None, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
@@ -255,6 +259,21 @@ class ImplicitNewmark:
         s._de = problem.E   # the step's strain increment, where the explicit phases leave it
         for term in self.terms:
             term.commit(s, problem, u)
+
+    def _support_work(self, s, problem, u, R, a_new, held):
+        """Work of the supports that move (ground motion) over the step, into the external
+        work (the explicit step's grid update does the same): the force a held component
+        needs, m a - f_int - f_ext - the terms' forces, by the trapezoid of the step's start
+        (the last step's end) and end over the held increment."""
+        R = R.copy()
+        for term in self.terms:
+            term.add_residual(problem, u, R)
+        force = np.where(held, problem.mass[..., None] * a_new - R, 0.0)
+        before = getattr(self, "_support_force", None)
+        if before is None or before.shape != force.shape:
+            before = force
+        s.external_work += float(np.sum(0.5 * (before + force) * np.where(held, u, 0.0)))
+        self._support_force = force
 
     def _work(self, s, problem, t0, h):
         """Internal work (trapezoid of the start and trial stresses over the step's strain) and

@@ -8,6 +8,9 @@ each called at its place in the step (pmpm.core.implicit.scheme, .problem):
   ``a`` (window arrays (nx, ny, 2); held components not written here keep the boundary's
   prescribed velocity, u = h v, dv = 0, a = 0). Called before Newton (u) and at the commit
   (dv, a: what the particles near the supports receive);
+* ``prescribe_start(s, t0, v, a)``: the held components' velocity and acceleration at the
+  step's start (window arrays; by default the boundary's prescribed velocity and no
+  acceleration), before the step's equations are set up (dynamics);
 * ``begin(problem)``: the step's equations are set up (start velocities, HHT's start forces);
   returns the term's force at the step's start (window array, halo-complete) or None;
 * ``add_residual(problem, u, R)``: add the term's nodal forces at the trial increment ``u`` to
@@ -27,6 +30,9 @@ class ImplicitTerm:
     """A part of the implicit step contributed by an effect (module doc)."""
 
     def prescribe(self, s, t0, h, u, dv, a):
+        pass
+
+    def prescribe_start(self, s, t0, v, a):
         pass
 
     def begin(self, problem):
