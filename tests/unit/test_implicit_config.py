@@ -79,6 +79,8 @@ CASES = {
                   "reactions: is explicit-only for now"),
     "checkpoints": (_append("[output]\ncheckpoint_interval = 0.01"), [], "output.checkpoint_interval: restart is "
                                                                           "explicit-only"),
+    "initial-static-in-statics": (_append('analysis = "static"\n[solver.implicit]\ninitial_static = true'), [],
+                                  "solver.implicit.initial_static: starts a dynamic analysis from static equilibrium"),
     "neo-hookean": (_edit('type = "linear_elastic"', 'type = "neo_hookean"'), [],
                     "materials.steel.type: neo_hookean has no tangent for the implicit integrator yet"),
 }

@@ -127,6 +127,8 @@ class ImplicitNewmark:
         self.terms = [t for t in (e.implicit_term(s) for e in s.effects) if t is not None]
         if ACCELERATION not in s.particles.fields:
             s.particles.add_field(ACCELERATION, (2,))
+            if self.dynamic and self.options.get("initial_static"):
+                self.initial_equilibrium(s)
             if self.dynamic:
                 self.start_accelerations(s)
 
@@ -166,6 +168,25 @@ class ImplicitNewmark:
         a = np.where(active, G[..., INERTIA] / safe, 0.0)
         held = s.window.bc_mask.astype(bool)
         return np.where(held, s.window.bc_vel, v), np.where(held, 0.0, a)
+
+    def initial_equilibrium(self, s):
+        """``initial_static``: the loads at the start time (gravity, the force sets' values at
+        t0) brought to static equilibrium in one load step before the dynamics (time does not
+        advance, the particles stay at rest); the supports' reaction is kept as
+        ``initial_reaction``. The dynamic run then starts from that state with a_0 = 0 up to
+        Newton's tolerance (start_accelerations), so nothing moves until a load changes."""
+        self.dynamic = False
+        try:
+            self.substep(s, 0.0, s.t)
+        except NewtonFailed as exc:
+            raise UnstableRunError(f"the initial static equilibrium (solver.implicit.initial_static) did not "
+                                   f"converge ({exc})") from None
+        finally:
+            self.dynamic = True
+        self.initial_reaction = self.held_force.copy()
+        if s.decomp.rank == 0:
+            logger.info("initial static equilibrium: %d Newton iterations, supports carry %s N",
+                        self.stats["newton_iterations"], np.array2string(self.initial_reaction, precision=6))
 
     def start_accelerations(self, s):
         """Newmark's a_0 = M^-1 (f_ext(t0) + f_int(sigma_0)) on the grid (lumped mass),
