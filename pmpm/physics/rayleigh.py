@@ -247,6 +247,7 @@ class RayleighImplicit(ImplicitTerm):
     def begin(self, problem):
         """The damping force of the step's start velocities (HHT's start forces, Newmark's a_0)."""
         self.D = None
+        self.blocks = None   # gamma / (beta dt) a1 K_0: the same at every iteration of the step
         if problem.v is None:
             return None
         F, self.sv_start = self._force(problem, problem.v)
@@ -269,9 +270,12 @@ class RayleighImplicit(ImplicitTerm):
         m = problem.mass[d.active]
         Kb[:, centre, 0, 0] += e.a0 * c * m
         Kb[:, centre, 1, 1] += e.a0 * c * m
-        n = problem.s.particles.n
-        IK.assemble_blocks(problem.x, problem.vol, np.zeros((n, 3)), self.identity(n), e.a1 * c * self.D, d.lid,
-                           Kb, *problem.geometry)
+        if self.blocks is None or self.blocks.shape != Kb.shape:   # once a step (K_0: start positions)
+            n = problem.s.particles.n
+            self.blocks = np.zeros_like(Kb)
+            IK.assemble_blocks(problem.x, problem.vol, np.zeros((n, 3)), self.identity(n), e.a1 * c * self.D,
+                               d.lid, self.blocks, *problem.geometry)
+        Kb += self.blocks
 
     def commit(self, s, problem, u):
         """The step's dissipation, u . C (v_n + v_{n+1}) / 2 (the rule's trapezoid), into the
