@@ -87,7 +87,8 @@ QUICK_T_END, QUICK_FE_LEVEL = 0.05, 1
 #: ``--implicit``: the main job's explicit setting, then the implicit integrator at T1/20 ...
 #: T1/400 on the same grid (issue 37), for the cost side by side
 IMPLICIT_DIVISIONS = (20, 40, 100, 200, 400)
-IMPLICIT = (BASE,) + tuple(dataclasses.replace(BASE, time_step=FE_PERIOD_NOMINAL / n) for n in IMPLICIT_DIVISIONS)
+IMPLICIT = (BASE,) + tuple(dataclasses.replace(BASE, time_step=FE_PERIOD_NOMINAL / n) for n in IMPLICIT_DIVISIONS) \
+    + tuple(dataclasses.replace(BASE, ppc=3, time_step=FE_PERIOD_NOMINAL / n) for n in (20, 40))   # docs/implicit.md
 
 
 # -- the reference ---------------------------------------------------------------------------
