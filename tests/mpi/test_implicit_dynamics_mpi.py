@@ -29,7 +29,12 @@ comm = MPI.COMM_WORLD
 @pytest.mark.mpi(min_size=2)
 def test_rayleigh_damped_bar_same_on_any_rank_count():
     """The bar with 5 % Rayleigh damping in its first two modes, 6 steps of 8 a period."""
-    ok, report, s = _compare(damped_bar(periods=0.75))
+    # Newton's tolerance tightened (as below): at the default 1e-8 of the force scale the
+    # velocities, gamma / (beta dt) times the increments, differ by 3.4e-9 on 3 ranks; a
+    # partition bug moves them by 4e-2 (the planted one above)
+    scene = damped_bar(periods=0.75)
+    implicit = dict(scene.solver.implicit, residual_tolerance=1e-10)
+    ok, report, s = _compare(dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, implicit=implicit)))
     assert ok, report
     assert s.decomp.size == comm.Get_size()
 
