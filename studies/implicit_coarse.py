@@ -26,7 +26,6 @@ printed is one JSON object.
 import argparse
 import dataclasses
 import json
-import math
 import time
 
 import numpy as np

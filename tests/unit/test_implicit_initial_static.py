@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pmpm.benchmarks.implicit import BEAM_L, BEAM_Y0, cantilever_scene, timoshenko_tip_deflection
+from pmpm.benchmarks.implicit import BEAM_Y0, cantilever_scene, timoshenko_tip_deflection
 from pmpm.build import build_solver
 
 G = 9.81
