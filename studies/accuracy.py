@@ -600,6 +600,9 @@ def add_arguments(p):
                    help="run only the frame's reference and the CFL-number sweep")
     p.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                    help="time axis of the analysis: wall (default) or CPU time of the stepping")
+    p.add_argument("--implicit", action="store_true",
+                   help="with --response: the implicit integrator's rows (time steps T1/20 ... T1/400) beside the "
+                        "main job's explicit setting (issue 37)")
     p.add_argument("--response", action="store_true",
                    help="instead: the whole 0.25 s response of the elastic frame per setting (cell, shape, scheme, "
                         "CFL, transfer): numerical damping, every peak and the period against the continuum FE "
@@ -837,7 +840,8 @@ def accuracy(args):
         return 2
     if args.response:
         from studies.accuracy_response import main as response
-        return response((["--quick"] if args.quick else []) + ["--outdir", args.outdir])
+        return response((["--quick"] if args.quick else []) + (["--implicit"] if args.implicit else [])
+                        + ["--outdir", args.outdir])
     command = None
     if sys.argv[1:3] == ["bench", "accuracy"]:
         command = ("pmpm bench accuracy " + " ".join(sys.argv[3:])).strip()

@@ -58,13 +58,20 @@ class Setting:
     transfer: str = "flip"
     xpic_order: int = 2
     ppc: int = 2
+    time_step: float = 0.0      # > 0: the implicit integrator (Newmark, docs/implicit.md) at this step
 
     @property
     def label(self):
+        if self.time_step > 0:
+            return (f"{self.cell:g} m {self.shape} {self.ppc}x{self.ppc} implicit dt = T1/"
+                    f"{FE_PERIOD_NOMINAL / self.time_step:.0f} ({1e3 * self.time_step:.3g} ms)")
         t = f"xpic({self.xpic_order})" if self.transfer == "xpic" else self.transfer
         return f"{self.cell:g} m {self.shape} {self.ppc}x{self.ppc} {self.scheme.upper()} CFL {self.cfl:g} {t.upper()}"
 
 
+#: the continuum model's first period (docs/portal_frame.md section 8, Richardson: 40.04 ms), the
+#: unit of the implicit rows' time steps (T1/20 ... T1/400, issue 37)
+FE_PERIOD_NOMINAL = 0.04004
 BASE = Setting()
 #: the full study: the main job's setting and one change at a time, plus the finer grids
 FULL = (BASE, dataclasses.replace(BASE, cfl=0.5), dataclasses.replace(BASE, cfl=1.0),
@@ -77,6 +84,11 @@ QUICK_CELL = 0.1
 QUICK = (dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3), dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, transfer="apic"),
          dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, transfer="xpic"))
 QUICK_T_END, QUICK_FE_LEVEL = 0.05, 1
+#: ``--implicit``: the main job's explicit setting, then the implicit integrator at T1/20 ...
+#: T1/400 on the same grid (issue 37), for the cost side by side
+IMPLICIT_DIVISIONS = (20, 40, 100, 200, 400)
+IMPLICIT = (BASE,) + tuple(dataclasses.replace(BASE, time_step=FE_PERIOD_NOMINAL / n) for n in IMPLICIT_DIVISIONS) \
+    + tuple(dataclasses.replace(BASE, ppc=3, time_step=FE_PERIOD_NOMINAL / n) for n in (20, 40))   # docs/implicit.md
 
 
 # -- the reference ---------------------------------------------------------------------------
@@ -105,7 +117,19 @@ def frame_scene(setting, t_end):
     from studies.accuracy import frame_scene as regrid
     scene = regrid(setting.cell, setting.shape, setting.scheme, setting.ppc, t_end, cfl=setting.cfl)
     solver = dataclasses.replace(scene.solver, transfer=setting.transfer, xpic_order=setting.xpic_order)
-    return dataclasses.replace(scene, solver=solver)
+    scene = dataclasses.replace(scene, solver=solver)
+    return implicit_scene(scene, setting.time_step) if setting.time_step > 0 else scene
+
+
+def implicit_scene(scene, time_step):
+    """``scene`` under the implicit integrator at ``time_step``, without the outputs the implicit
+    step does not carry yet (section cuts, hysteresis, support reactions: docs/implicit.md); the
+    response (the tracked joint) is the same scene's."""
+    boundary = tuple(dataclasses.replace(b, reaction=False) for b in scene.boundaries)
+    output = dataclasses.replace(scene.output, sections=(), hysteresis=None, checkpoint_interval=None)
+    solver = dataclasses.replace(scene.solver, integrator="implicit", scheme="newmark",
+                                 time_step=float(time_step))
+    return dataclasses.replace(scene, boundaries=boundary, output=output, solver=solver)
 
 
 def run_setting(setting, t_end=T_END):
@@ -285,7 +309,8 @@ def study(settings, t_end, fe_level, outdir, log=sys.stderr):
     for k, s in enumerate(settings):
         t0 = time.perf_counter()
         run = run_setting(s, t_end)
-        key = (s.cell, s.ppc)
+        # the reference on the run's own sampling (an implicit run samples every step)
+        key = (s.cell, s.ppc, len(run["t"]), float(run["t"][-1])) if run["status"] == "ok" else None
         if key not in refs and run["status"] == "ok":
             refs[key] = fe_reference(run["t"], s.cell, s.ppc, fe_level)
         if run["status"] == "ok":
@@ -311,12 +336,14 @@ def main(argv=None, out=None):
     out = out or sys.stdout   # looked up at the call: a caller's redirect_stdout holds
     ap = argparse.ArgumentParser(prog="python -m studies.accuracy_response", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI test's reduced study (0.1 m, 0.05 s)")
+    ap.add_argument("--implicit", action="store_true",
+                    help="the implicit integrator's rows instead: time steps T1/20 ... T1/400 at 0.05 m")
     ap.add_argument("--outdir", default="accuracy_results", help="folder of response.{md,csv,png}")
     ap.add_argument("--only", type=int, nargs="+", metavar="K", help="run only these of the settings (0-based)")
     ap.add_argument("--end", type=float, help="end time (s), default 0.25 (quick: 0.05)")
     ap.add_argument("--list", action="store_true", help="list the settings and exit")
     args = ap.parse_args(argv)
-    settings = QUICK if args.quick else FULL
+    settings = QUICK if args.quick else IMPLICIT if args.implicit else FULL
     if args.list:
         for k, s in enumerate(settings):
             print(k, s.label, file=out)

@@ -36,11 +36,13 @@ What an effect gives the step, in the order of a step (docs/architecture.md draw
 * ``summary(s)``: entries of the run summary at the end (the first fracture of each body).
 * ``implicit_support``: True if the implicit integrator carries the effect (default False:
   refused there, so that a new effect is never silently left out of an implicit step).
-  The implicit step calls none of the hooks above; it has two of its own:
+  The implicit step calls none of the hooks above; it has its own:
   ``prescribe_increment(s, t0, h, U)`` (the displacement increments of held components over
-  the step from ``t0`` to ``t0 + h``, written into the window array ``U``: a pushover's nodes)
-  and ``after_implicit_step(s, step)`` (a converged step's nodal support forces,
-  :class:`ConvergedStep`: reactions).
+  the step from ``t0`` to ``t0 + h``, written into the window array ``U``: a pushover's nodes),
+  ``after_implicit_step(s, step)`` (a converged step's nodal support forces,
+  :class:`ConvergedStep`: reactions), and ``implicit_term(s)``: what it adds to the implicit
+  step's equations, if anything (a pmpm.core.implicit.terms.ImplicitTerm: forces and tangent
+  blocks, prescribed support motion, its work), None by default.
 
 A material can contribute energy terms too (:data:`ENERGY_TERMS`, ``register_energy``): a
 damage model's dissipated energy is one more column without a change here.
@@ -164,6 +166,10 @@ class Effect:
 
     def after_implicit_step(self, s, step):
         pass
+
+    def implicit_term(self, s):
+        """The effect's part of the implicit step (pmpm.core.implicit.terms), or None."""
+        return None
 
     # -- state and reporting ---------------------------------------------------------------
     def restore(self, s, attrs):

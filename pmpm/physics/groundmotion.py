@@ -5,6 +5,13 @@ The record is read from a two-column text file (time, acceleration in m/s^2) or 
 ``scale``. The ground velocity is the exact integral of the piecewise-linear acceleration; each
 step the nodes of the chosen ``fixed`` boundaries move with it along ``direction`` (the other
 component stays fixed), so a structure carried rigidly by the ground moves with no strain.
+
+Under the implicit integrator (``GroundMotionImplicit``, docs/implicit.md) the formulation is the
+same, absolute: the driven nodes are held components of the step whose displacement increment
+is the ground's, the exact integral of the ground velocity over the step (the record's
+piecewise-linear acceleration integrated twice), and whose velocity change and end acceleration,
+which the particles near the supports receive, are the ground's; no effective load -M a_g is
+applied, displacements and velocities are absolute (drifts are differences of points).
 """
 import logging
 import os
@@ -13,6 +20,7 @@ import re
 import numpy as np
 
 from pmpm.core.effects import Effect
+from pmpm.core.implicit.terms import ImplicitTerm
 from pmpm.errors import ConfigError
 from pmpm.files import read_regular
 from pmpm.physics.boundary import select_nodes
@@ -142,6 +150,10 @@ class GroundMotion(Effect):
                                                            f"{MAX_GROUND_ACCELERATION / G:g} g")
         dt = np.diff(self.t)
         self.v = np.concatenate([[0.0], np.cumsum(0.5 * (self.a[1:] + self.a[:-1]) * dt)])
+        # ground displacement at the samples: the integral of the velocity (exact for
+        # piecewise-linear acceleration: v_k h + a_k h^2 / 2 + (a_k+1 - a_k) h^2 / 6 a sample)
+        self.d = np.concatenate([[0.0], np.cumsum(self.v[:-1] * dt + self.a[:-1] * dt ** 2 / 2
+                                                  + (self.a[1:] - self.a[:-1]) * dt ** 2 / 6)])
         self.direction = 0 if config["direction"] == "x" else 1
         # the box supports (a boundary attached to a body holds particles, not nodes)
         names = config["boundaries"] or [b.name for b in boundaries if b.type == "fixed" and b.body is None]
@@ -176,6 +188,26 @@ class GroundMotion(Effect):
         h = self.t[k + 1] - self.t[k]
         return float(self.v[k] + self.a[k] * tau + (self.a[k + 1] - self.a[k]) * tau * tau / (2 * h))
 
+    def acceleration(self, time):
+        """Ground acceleration at ``time`` (the record's linear interpolation; 0 outside it:
+        the velocity stays at its last value, as ``velocity`` says)."""
+        if time <= self.t[0] or time >= self.t[-1]:
+            return 0.0
+        return float(np.interp(time, self.t, self.a))
+
+    def displacement(self, time):
+        """Ground displacement at ``time`` (exact for piecewise-linear acceleration; after the
+        record, the last velocity carries on)."""
+        if time <= self.t[0]:
+            return 0.0
+        if time >= self.t[-1]:
+            return float(self.d[-1] + self.v[-1] * (time - self.t[-1]))
+        k = int(np.searchsorted(self.t, time) - 1)
+        tau = time - self.t[k]
+        h = self.t[k + 1] - self.t[k]
+        return float(self.d[k] + self.v[k] * tau + self.a[k] * tau ** 2 / 2
+                     + (self.a[k + 1] - self.a[k]) * tau ** 3 / (6 * h))
+
     def bind(self, window):
         """Find the window's nodes of the driven boundaries (after every window rebuild)."""
         sel = np.zeros(window.shape, dtype=bool)
@@ -188,8 +220,37 @@ class GroundMotion(Effect):
         window.bc_vel[self.nodes[0], self.nodes[1], self.direction] = self.velocity(time)
 
     # -- effect hooks
+    implicit_support = True
+
+    def implicit_term(self, s):
+        """The driven supports' motion in the implicit step (module doc)."""
+        return GroundMotionImplicit(self)
+
     def on_window(self, s):
         self.bind(s.window)
 
     def before_grid_update(self, s, t_next):
         self.apply(s.window, t_next)
+
+
+class GroundMotionImplicit(ImplicitTerm):
+    """The driven nodes' motion over an implicit step (module doc): held components whose
+    displacement increment, velocity change and end acceleration are the ground's."""
+
+    def __init__(self, effect):
+        self.effect = effect
+
+    def prescribe_start(self, s, t0, v, a):
+        g = self.effect
+        v[g.nodes[0], g.nodes[1], g.direction] = g.velocity(t0)
+        a[g.nodes[0], g.nodes[1], g.direction] = g.acceleration(t0)
+
+    def prescribe(self, s, t0, h, u, dv, a):
+        g = self.effect
+        i, j, k = g.nodes[0], g.nodes[1], g.direction
+        if u is not None:
+            u[i, j, k] = g.displacement(t0 + h) - g.displacement(t0)
+        if dv is not None:
+            dv[i, j, k] = g.velocity(t0 + h) - g.velocity(t0)
+        if a is not None:
+            a[i, j, k] = g.acceleration(t0 + h)

@@ -32,12 +32,24 @@ point interpolation), taken about 3% lower; 1 for the domain interpolations (not
 Measured on the cantilever of tests/unit/test_damping.py (a1 c / h = 3.4, CFL 0.9): 1.1 times
 the step this rule gives runs, 1.2 times diverges within 120 steps. A scene that damps a short
 period on a fine grid pays for it in steps; docs/effects.md gives figures.
+
+Under the implicit integrator (``RayleighImplicit``, docs/implicit.md) the damping is the matrix
+term C v_{n+1} = a0 M v_{n+1} + a1 K_0 v_{n+1} of Newmark's equation of motion at the step's end:
+the mass part on the nodes' lumped masses, the stiffness part as the viscous stress a1 C : d of
+the end velocities' rate of deformation d (small strain on the step's start positions, C the
+elastic matrix, as the explicit step's viscous stress), so K_0 is the elastic stiffness whatever
+the material does. v_{n+1} is linear in the step's displacement increment u (dv / du = gamma /
+(beta dt)), so the term adds gamma / (beta dt) C to the tangent, exactly. Its work over a step is
+the trapezoid u . C (v_n + v_{n+1}) / 2, the rule's own energy balance. No stable-step limit.
 """
 import math
 
 import numba as nb
+import numpy as np
 
 from pmpm.core.effects import Effect, register_energy
+from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.terms import ImplicitTerm
 from pmpm.physics.damping import DAMPING_WORK
 from pmpm.physics.materials.linear_elastic import elastic_increment
 
@@ -152,6 +164,12 @@ class RayleighDamping(Effect):
                                         m.plane_strain, p["mat"], k if several else -1)
 
     # -- effect hooks
+    implicit_support = True
+
+    def implicit_term(self, s):
+        """The damping matrix in the implicit step (module doc)."""
+        return RayleighImplicit(self, s.materials)
+
     def limit_dt(self, dt, speed, s):
         """The viscous stress shortens the stable step (module doc)."""
         return dt * self.stable_step_factor(speed, s.grid.h, self.undamped_limit)
@@ -174,6 +192,107 @@ class RayleighDamping(Effect):
         T1, T2 = self.periods
         return [f"Rayleigh damping {self.ratio:g} of critical at T = {T1:g} s and {T2:g} s "
                 f"(a0 = {self.a0:.4g} 1/s on the nodes, a1 = {self.a1:.4g} s viscous stress)"]
+
+
+def elastic_matrices(materials, mat_ids, n):
+    """(n, 3, 3): each particle's in-plane elastic matrix (engineering shear) of its material."""
+    D = np.zeros((n, 3, 3))
+    for k, m in enumerate(materials):
+        E, nu = m.E, m.nu
+        if m.plane_strain:
+            lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+            a, b, g = lam + 2 * mu, lam, mu
+        else:
+            c = E / (1 - nu * nu)
+            a, b, g = c, c * nu, 0.5 * c * (1 - nu)
+        mine = mat_ids == k if len(materials) > 1 else slice(None)
+        D[mine] = np.array([[a, b, 0.0], [b, a, 0.0], [0.0, 0.0, g]])
+    return D
+
+
+class RayleighImplicit(ImplicitTerm):
+    """C = a0 M + a1 K_0 in the implicit step's residual and tangent (module doc)."""
+
+    def __init__(self, effect, materials):
+        self.effect, self.materials = effect, materials
+        self.sv_start = self.sv = None
+
+    def _velocity(self, problem, u):
+        """v_{n+1} of the increment u (Newmark), on the window."""
+        rule = problem.rule
+        return problem.v + rule.velocity_change(problem.a, rule.acceleration(u, problem.v, problem.a))
+
+    def _force(self, problem, vel):
+        """(-C vel on the nodes, halo-complete; the viscous stress a1 C : d(vel) of the particles)."""
+        s, e = problem.s, self.effect
+        p = s.particles
+        n = p.n
+        f, E = np.empty((n, 4)), np.empty((n, 3))
+        IK.deformation_increment(problem.x, vel, *problem.geometry, f, E)
+        rate = np.stack([f[:, 0] - 1.0, f[:, 3] - 1.0, f[:, 1] + f[:, 2]], axis=1)
+        if self.D is None or len(self.D) != n:
+            self.D = elastic_matrices(self.materials, p["mat"], n)
+        sv = e.a1 * np.einsum("prs,ps->pr", self.D, rate)
+        F = np.zeros(problem.mass.shape + (2,))
+        IK.internal_force(problem.x, problem.vol, sv, self.identity(n), F, *problem.geometry)
+        s.decomp.sum_halo(F)
+        F -= e.a0 * problem.mass[..., None] * vel
+        return F, sv
+
+    def identity(self, n):
+        out = np.zeros((n, 4))
+        out[:, 0] = out[:, 3] = 1.0
+        return out
+
+    def begin(self, problem):
+        """The damping force of the step's start velocities (HHT's start forces, Newmark's a_0)."""
+        self.D = None
+        self.blocks = None   # gamma / (beta dt) a1 K_0: the same at every iteration of the step
+        if problem.v is None:
+            return None
+        F, self.sv_start = self._force(problem, problem.v)
+        return F
+
+    def add_residual(self, problem, u, R):
+        if problem.rule is None:   # statics: no velocities
+            return
+        F, self.sv = self._force(problem, self._velocity(problem, u))
+        R += F
+
+    def add_tangent(self, problem, u, Kb):
+        """gamma / (beta dt) (a0 M + a1 K_0): K_0 with the start positions' linear B."""
+        rule = problem.rule
+        if rule is None:
+            return
+        c = rule.gamma / (rule.beta * rule.dt)
+        d, e = problem.dofs, self.effect
+        centre = (d.span * d.span) // 2
+        m = problem.mass[d.active]
+        Kb[:, centre, 0, 0] += e.a0 * c * m
+        Kb[:, centre, 1, 1] += e.a0 * c * m
+        if self.blocks is None or self.blocks.shape != Kb.shape:   # once a step (K_0: start positions)
+            n = problem.s.particles.n
+            self.blocks = np.zeros_like(Kb)
+            IK.assemble_blocks(problem.x, problem.vol, np.zeros((n, 3)), self.identity(n), e.a1 * c * self.D,
+                               d.lid, self.blocks, *problem.geometry)
+        Kb += self.blocks
+
+    def commit(self, s, problem, u):
+        """The step's dissipation, u . C (v_n + v_{n+1}) / 2 (the rule's trapezoid), into the
+        effect's energy terms; the particles keep the end's viscous stress (output)."""
+        if problem.rule is None:
+            return
+        e = self.effect
+        vel = self._velocity(problem, u)
+        F, sv = self._force(problem, vel)
+        own = problem.dofs.owned_active[..., None] & ~problem.dofs.held   # held rows: the supports' reaction
+        e.damping_work += float(np.sum(np.where(own, e.a0 * problem.mass[..., None] * u * 0.5 * (problem.v + vel),
+                                                0.0)))
+        f = problem.f   # of the converged u (the commit evaluated it last)
+        strain = np.stack([f[:, 0] - 1.0, f[:, 3] - 1.0, f[:, 1] + f[:, 2]], axis=1)
+        e.viscous_damping_work += float(np.sum(problem.vol * np.einsum("pk,pk->p", 0.5 * (self.sv_start + sv),
+                                                                       strain)))
+        s.particles[RayleighDamping.FIELD][:] = sv
 
 
 # -- the kernels (numba compiles them only for scenes that ask for Rayleigh damping;

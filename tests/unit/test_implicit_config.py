@@ -98,6 +98,8 @@ CASES = {
     "pushover-dynamic": (lambda t: _append(PUSHOVER)(t.replace('type = "fixed"', 'name = "wall"\ntype = "fixed"\n'
                                                                'reaction = true')), [],
                          "pushover: is static only under the implicit integrator"),
+    "initial-static-in-statics": (_append('analysis = "static"\n[solver.implicit]\ninitial_static = true'), [],
+                                  "solver.implicit.initial_static: starts a dynamic analysis from static equilibrium"),
     "neo-hookean": (_edit('type = "linear_elastic"', 'type = "neo_hookean"'), [],
                     "materials.steel.type: neo_hookean has no tangent for the implicit integrator yet"),
 }

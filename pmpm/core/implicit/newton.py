@@ -6,7 +6,7 @@ collective), ``tangent(u)`` (assembles and factors the step's matrix at u), ``so
 window, ghosts filled). Convergence (docs/implicit.md):
 
     |R_k| <= residual_tolerance * max(|R_0|, force scale)       (the residual)
-    |du . R_k| <= energy_tolerance * |du_0 . R_0|               (the energy norm)
+    |du . R_k| <= energy_tolerance * |du_0 . R_0| (scale / |R_0|)^2   (the energy norm)
 
 where du is the correction the last factorisation gives for R_k (a back-substitution, no new
 factorisation) and the force scale is the norm of the internal and external forces at the
@@ -77,7 +77,10 @@ def newton(problem, u, opts, history=None):
         du = problem.solve(r)
         energy = abs(problem.dot(du, r))
         if energy0 is None:
-            energy0 = energy if energy > 0.0 else 1.0
+            # the energy a first correction of the force scale's size would carry (energy goes
+            # as |R|^2): a step that starts near equilibrium (|R_0| << the force scale) is not
+            # asked to bring its energy 1e-12 below its own round-off level
+            energy0 = energy * (scale / norm) ** 2 if energy > 0.0 and norm > 0.0 else 1.0
         if history is not None and not (norm <= opts["residual_tolerance"] * scale and k > 0):
             history.append((norm, energy))
         r, norm = _step(problem, u, du, r, norm, opts["line_search"])

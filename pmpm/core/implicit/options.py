@@ -12,6 +12,8 @@
     line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
     hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
+    initial_static = false         # dynamics: first bring the loads at the start time (gravity,
+                                   # the force sets' values) to static equilibrium, then go on
 
     [solver.petsc]                 # PETSc options of the linear solve (without the dash)
     ksp_type = "cg"
@@ -32,7 +34,7 @@ ANALYSES = ("dynamic", "static")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
-                     "line_search": False, "max_halvings": 6, "hht_alpha": 0.0}
+                     "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False}
 
 
 def read_integrator(t):
@@ -64,7 +66,9 @@ def read_implicit(t):
            "line_search": t.boolean("line_search", d["line_search"]),
            "max_halvings": t.integer("max_halvings", d["max_halvings"], low=0, high=40),
            # HHT-alpha: 0 is the trapezoidal rule, -1/3 the most damping of the high modes
-           "hht_alpha": t.number("hht_alpha", d["hht_alpha"], low=-1.0 / 3.0, high=0.0)}
+           "hht_alpha": t.number("hht_alpha", d["hht_alpha"], low=-1.0 / 3.0, high=0.0),
+           # gravity (and the loads at the start) to static equilibrium before the dynamics
+           "initial_static": t.boolean("initial_static", d["initial_static"])}
     t.finish()
     return out
 
@@ -109,6 +113,9 @@ def check_implicit_scene(scene, materials):
         return
     if cfg.time_step is None:
         raise ConfigError("solver.time_step", "required by the implicit integrator (its step is not the CFL rule's)")
+    if cfg.implicit.get("initial_static") and cfg.analysis != "dynamic":
+        raise ConfigError("solver.implicit.initial_static", "starts a dynamic analysis from static equilibrium "
+                                                            "(solver.analysis = \"static\" is static throughout)")
     for bad, key, why in _unsupported(scene):
         if bad:
             raise ConfigError(key, f"{why} (solver.integrator = \"implicit\")")

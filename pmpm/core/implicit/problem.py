@@ -41,7 +41,7 @@ class GridProblem:
         start's forces by -alpha).
     """
 
-    def __init__(self, s, linear, rule, fext, v, a, fext_start=None):
+    def __init__(self, s, linear, rule, fext, v, a, fext_start=None, terms=()):
         self.s, self.linear, self.rule = s, linear, rule
         w, g = s.window, s.grid
         self.mass = w.G[..., 0]
@@ -67,6 +67,9 @@ class GridProblem:
         self.factorisations = 0
         self._evaluated = None
         self.force_scale = 0.0
+        # the effects' terms (pmpm.core.implicit.terms): their forces at the step's start
+        self.terms = tuple(terms)
+        self.term_start = [t.begin(self) for t in self.terms]
         self.force_scale = self._start_force_scale()
 
     # -- the state of a trial increment ----------------------------------------------------
@@ -100,6 +103,9 @@ class GridProblem:
         self.fint_start = fint0   # (the supports' forces at the step's start: pmpm.core.implicit.scheme)
         if self.alpha:
             self.force_start = fint0 + self.fext_start
+            for f in self.term_start:
+                if f is not None:
+                    self.force_start += f
         fi = self.dofs.owned_values(fint0)
         fe = self.dofs.owned_values(self.fext)
         return float(np.sqrt(self.s.decomp.allreduce_sum(
@@ -109,6 +115,8 @@ class GridProblem:
         """(owned residual vector with held components zero, its global 2-norm)."""
         R = self.internal_force(u)
         R += self.fext
+        for term in self.terms:
+            term.add_residual(self, u, R)
         if self.alpha:   # HHT: the forces at n + 1 + alpha
             R *= 1.0 + self.alpha
             R -= self.alpha * self.force_start
@@ -130,6 +138,8 @@ class GridProblem:
         span = d.span
         Kb = np.zeros((d.n_local, span * span, 2, 2))
         IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, d.lid, Kb, *self.geometry)
+        for term in self.terms:
+            term.add_tangent(self, u, Kb)
         if self.alpha:
             Kb *= 1.0 + self.alpha
         diag = self._diagonal(Kb)

@@ -125,8 +125,12 @@ class ImplicitNewmark:
         if self.linear is not None:
             return
         self.linear = LinearSolver(s.comm, self.petsc)
+        # what the effects add to the step (pmpm.core.implicit.terms)
+        self.terms = [t for t in (e.implicit_term(s) for e in s.effects) if t is not None]
         if ACCELERATION not in s.particles.fields:
             s.particles.add_field(ACCELERATION, (2,))
+            if self.dynamic and self.options.get("initial_static"):
+                self.initial_equilibrium(s)
             if self.dynamic:
                 self.start_accelerations(s)
 
@@ -167,14 +171,37 @@ class ImplicitNewmark:
         held = s.window.bc_mask.astype(bool)
         return np.where(held, s.window.bc_vel, v), np.where(held, 0.0, a)
 
+    def initial_equilibrium(self, s):
+        """``initial_static``: the loads at the start time (gravity, the force sets' values at
+        t0) brought to static equilibrium in one load step before the dynamics (time does not
+        advance, the particles stay at rest); the supports' reaction is kept as
+        ``initial_reaction``. The dynamic run then starts from that state with a_0 = 0 up to
+        Newton's tolerance (start_accelerations), so nothing moves until a load changes."""
+        self.dynamic = False
+        try:
+            self.substep(s, 0.0, s.t)
+        except NewtonFailed as exc:
+            raise UnstableRunError(f"the initial static equilibrium (solver.implicit.initial_static) did not "
+                                   f"converge ({exc})") from None
+        finally:
+            self.dynamic = True
+        self.initial_reaction = self.held_force.copy()
+        if s.decomp.rank == 0:
+            logger.info("initial static equilibrium: %d Newton iterations, supports carry %s N",
+                        self.stats["newton_iterations"], np.array2string(self.initial_reaction, precision=6))
+
     def start_accelerations(self, s):
         """Newmark's a_0 = M^-1 (f_ext(t0) + f_int(sigma_0)) on the grid (lumped mass),
         interpolated to the particles: the start state's own equilibrium, so that a load
         applied at t = 0 is felt at once."""
         self.grid_from_particles(s, s.t)
-        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), None, None)
+        v, _ = self.nodal_start(s)
+        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), v, None, None, self.terms)
         zero = np.zeros(s.window.G.shape[:2] + (2,))
         force = problem.internal_force(zero) + s.window.G[..., FORCE]
+        for f in problem.term_start:   # damping of the start velocities
+            if f is not None:
+                force += f
         m = s.window.G[..., MASS]
         active = (m > s.mass_cutoff)[..., None] & ~s.window.bc_mask.astype(bool)
         a0 = np.where(active, force / np.where(m > s.mass_cutoff, m, 1.0)[..., None], 0.0)
@@ -190,14 +217,18 @@ class ImplicitNewmark:
         self.grid_from_particles(s, t0 + h)
         rule = Newmark(h, self.alpha) if self.dynamic else None
         v, a = self.nodal_start(s) if self.dynamic else (None, None)
+        for term in self.terms if self.dynamic else ():
+            term.prescribe_start(s, t0, v, a)
         start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
-        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start)
+        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start, self.terms)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
         held = problem.held_increment(h)
         for prescribe in s._hooks["prescribe_increment"]:   # a pushover's nodes: their displacement
             prescribe(s, t0, h, held)
         u = np.where(problem.dofs.held, held, u)
+        for term in self.terms:   # supports that move (ground motion)
+            term.prescribe(s, t0, h, u, None, None)
         if not self.dynamic and s._hooks["prescribe_increment"]:   # displacement control
             u = linear_predictor(problem, u, s.grid.inv_h)
         self.history = []
@@ -229,8 +260,12 @@ class ImplicitNewmark:
             a_new = rule.acceleration(u, v, a)
             a_new = np.where(problem.dofs.active[..., None], a_new, 0.0)
             dv = rule.velocity_change(a, a_new)
+            for term in self.terms:   # the supports' own velocity change and acceleration
+                term.prescribe(s, t0, h, None, dv, a_new)
             vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
+            if self.terms:
+                self._support_work(s, problem, u, R, a_new, held)
         else:
             vmax, bad = IK.newmark_particles(p["x"], None, None, u, None, None, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
@@ -250,25 +285,53 @@ class ImplicitNewmark:
                 mine = p["mat"] == k if len(s.materials) > 1 else slice(None)
                 p[name][mine] = new[mine]
         s._de = problem.E   # the step's strain increment, where the explicit phases leave it
-        if s._hooks["after_implicit_step"] or s._hooks["prescribe_increment"]:   # reactions, moving supports
-            self._supports(s, problem, u, R, a_new if rule is not None else None, t0, h)
+        for term in self.terms:
+            term.commit(s, problem, u)
+        if s._hooks["after_implicit_step"] or s._hooks["prescribe_increment"]:   # reactions, a pushover
+            self._supports(s, problem, u, R, a if rule is not None else None,
+                           a_new if rule is not None else None, t0, h)
 
-    def _supports(self, s, problem, u, R, a_new, t0, h):
+    def _supports(self, s, problem, u, R, a_start, a_new, t0, h):
         """The supports' forces on the held components, to the effects that read them
-        (pmpm.core.effects.ConvergedStep), and their work over the held increments (the
-        trapezoid of the step's start and end forces: a pushover's work, which the energy check
-        counts as external). In statics the force is minus the free equations' residual there
-        (f_int + f_ext); in dynamics m a - (f_int + f_ext); at the step's start on this step's
-        grid (the held nodes start with no acceleration, ``nodal_start``)."""
+        (pmpm.core.effects.ConvergedStep). In statics the force is minus the free equations'
+        residual there (f_int + f_ext), and its work over the held increments (the trapezoid of
+        the step's start and end forces: a pushover's work) goes to the external work. In
+        dynamics it is m a - (f_int + f_ext) - the terms' forces (Rayleigh's) at the end, and
+        m a - (f_int + f_ext) at the start (the held nodes' start acceleration: zero, or the
+        ground's; the start's damping forces at the supports are left out of the start value);
+        the moving supports' work is :meth:`_support_work`'s there (fixed ones do none)."""
         held = problem.dofs.held
-        start = np.where(held, -(problem.fint_start + self.external_forces(s, t0)), 0.0)
-        end = -R if a_new is None else problem.mass[..., None] * a_new - R
-        end = np.where(held, end, 0.0)
-        mine = problem.dofs.owned_active[..., None]
-        s.external_work += float(np.sum(np.where(mine, 0.5 * (start + end) * u, 0.0)))
+        start = -(problem.fint_start + self.external_forces(s, t0))
+        if a_new is None:
+            end = -R
+        else:
+            start = start + problem.mass[..., None] * a_start
+            R = R.copy()
+            for term in self.terms:
+                term.add_residual(problem, u, R)
+            end = problem.mass[..., None] * a_new - R
+        start, end = np.where(held, start, 0.0), np.where(held, end, 0.0)
+        if a_new is None:
+            mine = problem.dofs.owned_active[..., None]
+            s.external_work += float(np.sum(np.where(mine, 0.5 * (start + end) * u, 0.0)))
         step = ConvergedStep(t0, h, a_new is None, end, None if a_new is None else start)
         for after in s._hooks["after_implicit_step"]:
             after(s, step)
+
+    def _support_work(self, s, problem, u, R, a_new, held):
+        """Work of the supports that move (ground motion) over the step, into the external
+        work (the explicit step's grid update does the same): the force a held component
+        needs, m a - f_int - f_ext - the terms' forces, by the trapezoid of the step's start
+        (the last step's end) and end over the held increment."""
+        R = R.copy()
+        for term in self.terms:
+            term.add_residual(problem, u, R)
+        force = np.where(held, problem.mass[..., None] * a_new - R, 0.0)
+        before = getattr(self, "_support_force", None)
+        if before is None or before.shape != force.shape:
+            before = force
+        s.external_work += float(np.sum(0.5 * (before + force) * np.where(held, u, 0.0)))
+        self._support_force = force
 
     def _work(self, s, problem, t0, h):
         """Internal work (trapezoid of the start and trial stresses over the step's strain) and
