@@ -70,14 +70,16 @@ def gather_affine(G, f, q, K, I0, J0, WX, WY, ox, oy, sx, sy):
     bxy = 0.0
     byx = 0.0
     byy = 0.0
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
     for a in range(K):
-        ii = I0[q] + a - ox
+        ii = i0 + a - ox
         wa = WX[a, q]
-        ddx = I0[q] + a - sx
+        ddx = i0 + a - sx
         for b in range(K):
-            jj = J0[q] + b - oy
+            jj = j0 + b - oy
             w = wa * WY[b, q]
-            ddy = J0[q] + b - sy
+            ddy = j0 + b - sy
             gvx = w * G[ii, jj, f]
             gvy = w * G[ii, jj, f + 1]
             vx += gvx

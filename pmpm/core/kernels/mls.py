@@ -65,9 +65,14 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
                 # D^-1 in 1/cells^2; a particle on the grid's edge (D singular) exerts no stress
                 # force (APIC keeps no affine velocity there either)
                 r = 1.0 / det if det > D_FLOOR else 0.0
+                ixx = dyy * r
+                ixy = -dxy * r
+                iyy = dxx * r
+                # A = (-V sigma / h) D^-1: the force N_i A (x_i - x_p), the form of the momentum's
                 scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
-                            with_force, fx, fy, stress is not None, sxx, syy, sxy,
-                            (dyy * r, -dxy * r, dxx * r, sx, sy))
+                            with_force, fx, fy, stress is not None, 0.0, 0.0, 0.0,
+                            (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy,
+                             sxy * ixx + syy * ixy, sxy * ixy + syy * iyy))
 
 
 @nb.njit(cache=True)

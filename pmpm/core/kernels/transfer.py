@@ -200,18 +200,20 @@ def scatter2(G, f, q, K, I0, J0, WX, WY, ox, oy, ax, ay, affine):
     particle's vector (the MUSL re-map, XPIC's smoothing pass). With ``affine`` (kxx, kxy,
     kyx, kyy, sx, sy) not None the vector has an affine part: a + k (x_i - x_p), k per cell of
     offset, (sx, sy) the particle's position in cells (the APIC re-map)."""
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
     for a in range(K):
-        ii = I0[q] + a - ox
+        ii = i0 + a - ox
         wa = WX[a, q]
         for b in range(K):
-            jj = J0[q] + b - oy
+            jj = j0 + b - oy
             w = wa * WY[b, q]
             if affine is None:
                 G[ii, jj, f] += w * ax
                 G[ii, jj, f + 1] += w * ay
             else:
-                ddx = I0[q] + a - affine[4]   # x_i - x_p in cells
-                ddy = J0[q] + b - affine[5]
+                ddx = i0 + a - affine[4]   # x_i - x_p in cells
+                ddy = j0 + b - affine[5]
                 G[ii, jj, f] += w * (ax + affine[0] * ddx + affine[1] * ddy)
                 G[ii, jj, f + 1] += w * (ay + affine[2] * ddx + affine[3] * ddy)
 
@@ -223,14 +225,18 @@ def scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, mass, mp, mvx, mvy, affine,
     kernels (FLIP's, APIC's, MLS-MPM's): with ``mass``, m N_i into field 0 and the momentum
     N_i (m v + k (x_i - x_p)) into 1, 2 (``affine`` as in :func:`scatter2`, None: no affine
     part); with ``force``, N_i f_ext + (sxx, sxy; sxy, syy) g_i into 3, 4 (``stress``: with
-    the stress term), g_i the gradient grad N_i in cell units, or with ``mls`` (ixx, ixy, iyy,
-    sx, sy) not None MLS-MPM's N_i D^-1 (x_i - x_p) (D^-1 in 1/cells^2)."""
+    the stress term), g_i the gradient grad N_i in cell units. With ``mls`` (axx, axy, ayx,
+    ayy) not None (and ``affine`` given) the stress term is MLS-MPM's, N_i A (x_i - x_p) with
+    A = (sxx, sxy; sxy, syy) D^-1 computed once per particle (the force in the form of the
+    affine momentum: g_i = N_i D^-1 (x_i - x_p))."""
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
     for a in range(K):
-        ii = I0[q] + a - ox
+        ii = i0 + a - ox
         wa = WX[a, q]
         ga = WX[K + a, q]
         for b in range(K):
-            jj = J0[q] + b - oy
+            jj = j0 + b - oy
             wb = WY[b, q]
             w = wa * wb
             if mass:
@@ -239,24 +245,24 @@ def scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, mass, mp, mvx, mvy, affine,
                     G[ii, jj, 1] += w * mvx
                     G[ii, jj, 2] += w * mvy
                 else:
-                    ddx = I0[q] + a - affine[4]
-                    ddy = J0[q] + b - affine[5]
+                    ddx = i0 + a - affine[4]
+                    ddy = j0 + b - affine[5]
                     G[ii, jj, 1] += w * (mvx + affine[0] * ddx + affine[1] * ddy)
                     G[ii, jj, 2] += w * (mvy + affine[2] * ddx + affine[3] * ddy)
             if force:
-                fnx = w * fx
-                fny = w * fy
-                if stress:
-                    if mls is None:
+                if mls is None:
+                    fnx = w * fx
+                    fny = w * fy
+                    if stress:
                         dnx = ga * wb
                         dny = wa * WY[K + b, q]
-                    else:
-                        ex = I0[q] + a - mls[3]
-                        ey = J0[q] + b - mls[4]
-                        dnx = w * (mls[0] * ex + mls[1] * ey)
-                        dny = w * (mls[1] * ex + mls[2] * ey)
-                    fnx += sxx * dnx + sxy * dny
-                    fny += sxy * dnx + syy * dny
+                        fnx += sxx * dnx + sxy * dny
+                        fny += sxy * dnx + syy * dny
+                else:
+                    ex = i0 + a - affine[4]
+                    ey = j0 + b - affine[5]
+                    fnx = w * (fx + mls[0] * ex + mls[1] * ey)
+                    fny = w * (fy + mls[2] * ex + mls[3] * ey)
                 G[ii, jj, 3] += fnx
                 G[ii, jj, 4] += fny
 
