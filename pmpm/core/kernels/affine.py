@@ -23,12 +23,12 @@ refused by the scene (their D_p vanishes when a particle sits on a node).
 """
 import numba as nb
 
-from pmpm.core.kernels.transfer import (_buffers, _external_force, block_start, internal_force_stress, scatter2,
-                                        scatter_p2g, speed_check)
-from pmpm.core.shape import BLOCK, stencil
+from pmpm.core.kernels.transfer import (block_buffers, block_start, particle_forces, scatter2, scatter_p2g,
+                                        speed_check)
+from pmpm.core.shape import BLOCK
 
-__all__ = ["p2g_affine", "g2p_affine", "D_FLOOR", "affine_moments", "gather_affine", "affine_matrix",
-           "cell_position"]
+__all__ = ["p2g_affine", "g2p_affine", "D_FLOOR", "affine_momentum", "affine_moments", "gather_affine",
+           "affine_matrix", "cell_position", "store_velocity_update"]
 
 #: det D_p (cells^4) below which a particle keeps no affine velocity: D_p vanishes on a grid edge
 #: (1e-12: D_xx ~ s^2 within s cells of the edge, so particles closer than ~1e-6 cells)
@@ -42,21 +42,33 @@ def cell_position(x, p, origin, inv_h):
 
 
 @nb.njit(cache=True, inline="always")
+def affine_momentum(p, x, m, C, origin, inv_h, h):
+    """(m_p, affine): particle p's mass and the affine part of its momentum for
+    pmpm.core.kernels.transfer.scatter_p2g, m C in momentum per cell of offset with its
+    position in cells (kxx, kxy, kyx, kyy, sx, sy)."""
+    mp = m[p]
+    sx, sy = cell_position(x, p, origin, inv_h)
+    return mp, (mp * C[p, 0] * h, mp * C[p, 1] * h, mp * C[p, 2] * h, mp * C[p, 3] * h, sx, sy)
+
+
+@nb.njit(cache=True, inline="always")
+def _moments_1d(first, W, q, K, s):
+    """(sum_a w_a d_a, sum_a w_a d_a^2) along one axis, d_a = first + a - s (cells)."""
+    mean = 0.0
+    second = 0.0
+    for a in range(K):
+        d = first + a - s
+        mean += W[a, q] * d
+        second += W[a, q] * d * d
+    return mean, second
+
+
+@nb.njit(cache=True, inline="always")
 def affine_moments(q, K, I0, J0, WX, WY, sx, sy):
     """D_p = sum_i N_i (x_i - x_p)(x_i - x_p)^T of particle q in cells^2, (D_xx, D_yy, D_xy),
     from the 1-D weights (each axis' weights sum to 1, so D_xy is the product of the means)."""
-    mx = 0.0
-    dxx = 0.0
-    for a in range(K):
-        d = I0[q] + a - sx
-        mx += WX[a, q] * d
-        dxx += WX[a, q] * d * d
-    my = 0.0
-    dyy = 0.0
-    for b in range(K):
-        d = J0[q] + b - sy
-        my += WY[b, q] * d
-        dyy += WY[b, q] * d * d
+    mx, dxx = _moments_1d(I0[q], WX, q, K, sx)
+    my, dyy = _moments_1d(J0[q], WY, q, K, sy)
     return dxx, dyy, mx * my
 
 
@@ -102,6 +114,24 @@ def affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, scale):
             (byx * dyy - byy * dxy) * r, (byy * dxx - byx * dxy) * r)
 
 
+@nb.njit(cache=True, inline="always")
+def store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad):
+    """Particle p's new velocity and affine matrix into ``v`` and ``C``, its move dt v into
+    ``dx``; returns the running largest squared speed and count of non-finite particles."""
+    C[p, 0] = cxx
+    C[p, 1] = cxy
+    C[p, 2] = cyx
+    C[p, 3] = cyy
+    dx[p, 0] = dt * vx
+    dx[p, 1] = dt * vy
+    v[p, 0] = vx
+    v[p, 1] = vy
+    vmax2, bad = speed_check(vx, vy, vmax2, bad)
+    if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
+        bad += 1
+    return vmax2, bad
+
+
 @nb.njit(cache=True)
 def p2g_affine(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
                G, ox, oy, origin, inv_h, ncx, ncy, shape):
@@ -109,24 +139,14 @@ def p2g_affine(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     in 1/s), the internal force (``stress`` not None) and the external force into ``G``, as
     pmpm.core.kernels.transfer.p2g with ``v`` given."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
-            mp = m[p]
-            sx, sy = cell_position(x, p, origin, inv_h)
-            # m C in momentum per cell of offset
-            affine = (mp * C[p, 0] * h, mp * C[p, 1] * h, mp * C[p, 2] * h, mp * C[p, 3] * h, sx, sy)
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            sxx = 0.0
-            syy = 0.0
-            sxy = 0.0
-            if stress is not None:
-                sxx, syy, sxy = internal_force_stress(p, vol, stress, inv_h)
+            mp, affine = affine_momentum(p, x, m, C, origin, inv_h, h)
+            fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
             scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
                         with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
 
@@ -139,9 +159,7 @@ def g2p_affine(x, m, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx,
     speed and the number of particles whose new velocity or affine matrix is not finite."""
     vmax2 = 0.0
     bad = 0
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
@@ -151,17 +169,7 @@ def g2p_affine(x, m, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx,
             dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
             vx, vy, bxx, bxy, byx, byy = gather_affine(G, 1, q, K, I0, J0, WX, WY, ox, oy, sx, sy)
             cxx, cxy, cyx, cyy = affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, inv_h)
-            C[p, 0] = cxx
-            C[p, 1] = cxy
-            C[p, 2] = cyx
-            C[p, 3] = cyy
-            dx[p, 0] = dt * vx
-            dx[p, 1] = dt * vy
-            v[p, 0] = vx
-            v[p, 1] = vy
-            vmax2, bad = speed_check(vx, vy, vmax2, bad)
-            if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
-                bad += 1
+            vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             if remap:
                 mp = m[p]
                 scatter2(G, 5, q, K, I0, J0, WX, WY, ox, oy, mp * vx, mp * vy,

@@ -24,10 +24,11 @@ passes (no grid visit).
 """
 import numba as nb
 
-from pmpm.core.kernels.affine import D_FLOOR, affine_matrix, affine_moments, cell_position, gather_affine
-from pmpm.core.kernels.transfer import (_buffers, _external_force, block_start, gather2, gather_gradient,
-                                        internal_force_stress, scatter_p2g, speed_check, strain_increment)
-from pmpm.core.shape import BLOCK, stencil
+from pmpm.core.kernels.affine import (D_FLOOR, affine_matrix, affine_moments, affine_momentum, cell_position,
+                                      gather_affine, store_velocity_update)
+from pmpm.core.kernels.transfer import (block_buffers, block_start, gather2, gather_gradient, particle_forces,
+                                        scatter_p2g, strain_increment)
+from pmpm.core.shape import BLOCK
 
 __all__ = ["p2g_mls", "g2p_mls"]
 
@@ -39,23 +40,15 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     internal force -V sigma g_ip (MLS gradient; ``stress`` not None) and the external force
     N_ip f_ext into fields 0 .. 4 of ``G``."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
-            mp = m[p]
-            sx, sy = cell_position(x, p, origin, inv_h)
-            affine = (mp * C[p, 0] * h, mp * C[p, 1] * h, mp * C[p, 2] * h, mp * C[p, 3] * h, sx, sy)
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            sxx = 0.0
-            syy = 0.0
-            sxy = 0.0
-            if stress is not None:
-                sxx, syy, sxy = internal_force_stress(p, vol, stress, inv_h)
+            mp, affine = affine_momentum(p, x, m, C, origin, inv_h, h)
+            sx, sy = affine[4], affine[5]
+            fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
             if K == 2:   # linear: the B-spline gradient (the MLS gradient's value, defined on nodes)
                 scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
                             with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
@@ -85,9 +78,7 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
     and the number of particles whose velocity or C is not finite."""
     vmax2 = 0.0
     bad = 0
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
@@ -104,16 +95,6 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
                 dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
                 vx, vy, bxx, bxy, byx, byy = gather_affine(G, 1, q, K, I0, J0, WX, WY, ox, oy, sx, sy)
                 cxx, cxy, cyx, cyy = affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, inv_h)
-            C[p, 0] = cxx
-            C[p, 1] = cxy
-            C[p, 2] = cyx
-            C[p, 3] = cyy
-            dx[p, 0] = dt * vx
-            dx[p, 1] = dt * vy
-            v[p, 0] = vx
-            v[p, 1] = vy
-            vmax2, bad = speed_check(vx, vy, vmax2, bad)
-            if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
-                bad += 1
+            vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             strain_increment(p, dt, cxx, cxy, cyx, cyy, de, dw, strain, vol, F, vol0, dq)
     return vmax2 ** 0.5, bad

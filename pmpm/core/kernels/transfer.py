@@ -297,6 +297,28 @@ def internal_force_stress(p, vol, stress, inv_h):
 
 
 @nb.njit(cache=True, inline="always")
+def particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h):
+    """Particle p's external force and its -V sigma / h: (fx, fy, sxx, syy, sxy), the stress
+    part zero when ``stress`` is None (a pass without internal forces)."""
+    fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    if stress is not None:
+        # f_int = -V sigma . grad N  (gradient in cell units times 1/h)
+        sxx, syy, sxy = internal_force_stress(p, vol, stress, inv_h)
+    return fx, fy, sxx, syy, sxy
+
+
+@nb.njit(cache=True, inline="always")
+def block_buffers(shape):
+    """(K, B, I0, J0, WX, WY): the stencil width and the per-block scratch of :func:`_buffers`
+    with its first nodes and weights unpacked."""
+    B = _buffers(shape)
+    return stencil(shape), B, B[1], B[2], B[3], B[4]
+
+
+@nb.njit(cache=True, inline="always")
 def speed_check(vx, vy, vmax2, bad):
     """The running largest squared speed and count of non-finite velocities with (vx, vy)."""
     speed2 = vx * vx + vy * vy
@@ -312,9 +334,7 @@ def _p2g_point(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
     """Scatter mass and momentum (``v`` not None), internal force (``stress`` not None) and
     external force (``gravity``/``load_id`` not None) into the grid window ``G``."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
@@ -325,13 +345,7 @@ def _p2g_point(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
             if v is not None:
                 mvx = mp * v[p, 0]
                 mvy = mp * v[p, 1]
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            sxx = 0.0
-            syy = 0.0
-            sxy = 0.0
-            if stress is not None:
-                # f_int = -V sigma . grad N  (gradient in cell units times 1/h)
-                sxx, syy, sxy = internal_force_stress(p, vol, stress, inv_h)
+            fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
             scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, v is not None, mp, mvx, mvy, None,
                         with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
 
@@ -347,9 +361,7 @@ def _g2p_velocity_point(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape,
     vmax2 = 0.0
     bad = 0
     flip = 1.0 - pic
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
@@ -378,9 +390,7 @@ def _g2p_kinematics_point(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx,
     rate); ``F``, ``vol0``, ``dq``: the deformation gradient, see :func:`strain_increment`.
     Returns the work of the external forces over the moves."""
     work = 0.0
-    K = stencil(shape)
-    B = _buffers(shape)
-    I0, J0, WX, WY = B[1], B[2], B[3], B[4]
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
         nq = min(BLOCK, n - p0)
