@@ -201,6 +201,12 @@ def test_mls_refuses_what_it_cannot_run():
             make_scheme("mls", dataclasses.replace(base.solver, **change))
         assert e.value.key == key
     make_scheme("mls", base.solver)   # the bar as it is: accepted
+    # and the scene check says so before anything runs (pmpm run --check)
+    with pytest.raises(ConfigError) as e:
+        parse_scene({"grid": {"cell_size": 0.5, "cells": [4, 4]},
+                     "materials": {"m": {"type": "linear_elastic", "E": 1.0, "nu": 0.0, "density": 1.0}},
+                     "solver": {"scheme": "mls", "transfer": "apic", "end_time": 1.0}}, "s.toml")
+    assert e.value.key == "solver.transfer"
 
 
 def test_mls_keeps_its_affine_field_and_says_so():
