@@ -553,7 +553,6 @@ class Run:
         if s.keeps_F:
             out.append("deformation gradient F per particle")
         out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
-        out += s.scheme.describe()
         out += s.transfer.describe()
         out += s.grid_fields.describe()   # contact
         return out
