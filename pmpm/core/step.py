@@ -154,7 +154,8 @@ class Scheme:
         return transfer
 
     def describe(self):
-        """Lines of the run header's ``effect on:`` list (none for the paper's schemes)."""
+        """Lines for the run header's ``effect on:`` list (none for the schemes so far; the header,
+        pmpm.runner, does not read them yet)."""
         return []
 
     def advance(self, ctx):
