@@ -47,13 +47,13 @@ class PmpmSide:
 
     name = "pmpm"
 
-    def __init__(self, particles, shape="cubic"):
+    def __init__(self, particles, shape="cubic", scheme="musl"):
         from mpi4py import MPI
         from pmpm.build import build_solver
-        if shape != "cubic":
-            self.name = f"pmpm_{shape}"
-        self.label = f"pmpm MUSL ({shape})"
-        self.scene = block_scene(particles, shape, "musl", "elastic")
+        if shape != "cubic" or scheme != "musl":
+            self.name = f"pmpm_{shape}" if scheme == "musl" else f"pmpm_{scheme}_{shape}"
+        self.label = f"pmpm {scheme.upper()} ({shape})"
+        self.scene = block_scene(particles, shape, scheme, "elastic")
         self.solver = build_solver(self.scene, MPI.COMM_SELF)
         self.n = self.solver.particles.n
 
@@ -450,6 +450,11 @@ def interleave(sides, steps, repeat, clock=time.process_time):
     return samples
 
 
+def _floor_bytes(solver):
+    from pmpm.benchmarks.throughput import step_bytes_per_particle
+    return step_bytes_per_particle(solver)
+
+
 def _floor(solver):
     """(bytes per particle-step, measured bandwidth in bytes/s, floor in ns per particle-step):
     the bytes pmpm's step must stream (pmpm.benchmarks.throughput.step_bytes_per_particle) over
@@ -487,8 +492,12 @@ def peer(args):
     results = []
     for n in args.particles:
         _taichi(fresh=True)
-        # pmpm with the quadratic MLS program's stencil too: the same node count per particle
+        # pmpm with the quadratic MLS program's stencil too: the same node count per particle;
+        # and pmpm's own MLS scheme (pmpm.core.mls) with the stencil of each Taichi MLS program
         extra = [PmpmSide(n, "quadratic")] if "mls_quadratic" in names else []
+        mls = {k: PmpmSide(n, shape, "mls") for k, shape in (("mls_quadratic", "quadratic"), ("mls_cubic", "cubic"))
+               if k in names}
+        extra += list(mls.values())
         sides = [PmpmSide(n)] + extra + [PEERS[k](n) for k in names]
         for s in sides:  # compile (the peers), first touch of the arrays
             s.run(WARM_STEPS)
@@ -502,6 +511,16 @@ def peer(args):
         print(f"{sides[0].n:>9d} particles: pmpm {pm:.1f} ns/particle-step; memory floor "
               f"{floor:.1f} ns ({nbytes:.0f} bytes per particle-step at {bandwidth / 1e9:.1f} GB/s "
               f"STREAM triad): pmpm's step is {pm / floor:.1f} x the floor", flush=True)
+        res["pmpm_mls"] = {}
+        for key, side in mls.items():   # the MLS scheme's step and its own floor (fewer passes)
+            t = statistics.median(samples[side.name])
+            side_bytes = _floor_bytes(side.solver)
+            side_floor = side_bytes / bandwidth * 1e9
+            res["pmpm_mls"][side.name] = {"label": side.label, "ns_per_particle_step": t,
+                                          "bytes_per_particle_step": side_bytes,
+                                          "floor_ns_per_particle_step": side_floor, "over_floor": t / side_floor}
+            print(f"{'':>9s} {side.label:<34s} {t:8.1f} ns/particle-step; its floor {side_floor:.1f} ns "
+                  f"({side_bytes:.0f} bytes): {t / side_floor:.1f} x the floor", flush=True)
         for s in sides[1 + len(extra):]:
             pe = statistics.median(samples[s.name])
             ratios = [b / a for a, b in zip(samples["pmpm"], samples[s.name])]
@@ -509,6 +528,14 @@ def peer(args):
                                     "ratio_peer_over_pmpm": pe / pm, "ratio_per_round": ratios}
             print(f"{'':>9s} {s.label:<34s} {pe:8.1f} ns/particle-step ({s.n} particles): "
                   f"peer/pmpm {pe / pm:.2f} (rounds {min(ratios):.2f}-{max(ratios):.2f})", flush=True)
+            own = mls.get(s.name.replace("taichi_", ""))
+            if own is not None:   # the Taichi MLS program against pmpm's MLS with the same stencil
+                q = statistics.median(samples[own.name])
+                rq = [b / a for a, b in zip(samples[own.name], samples[s.name])]
+                res["peers"][s.name].update({f"{own.name}_ns_per_particle_step": q,
+                                             f"ratio_peer_over_{own.name}": pe / q})
+                print(f"{'':>9s} {'  against ' + own.label:<34s} {q:8.1f} ns/particle-step: "
+                      f"peer/pmpm {pe / q:.2f} (rounds {min(rq):.2f}-{max(rq):.2f})", flush=True)
             if s.name == "taichi_mls_quadratic" and extra:
                 q = statistics.median(samples[extra[0].name])
                 rq = [b / a for a, b in zip(samples[extra[0].name], samples[s.name])]

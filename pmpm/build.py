@@ -127,7 +127,7 @@ def build_solver(scene, comm=None):
     for material in materials:   # a length tied to the cell (the fracture's crack band)
         material.use_cell_size(grid.h)
     scheme = make_scheme(cfg.scheme, cfg)
-    transfer = make_transfer(cfg.transfer, cfg)
+    transfer = scheme.choose_transfer(make_transfer(cfg.transfer, cfg))   # mls brings its own
     reach = ghost_width(cfg.shape_function, cfg.interpolation)
     points = place_points(scene, grid, materials, list(scene.materials))
     setup = SimpleNamespace(grid=grid, materials=materials, points=points, reach=reach, scene_dir=_scene_dir(scene),

@@ -15,7 +15,7 @@ def warm_kernels(verbose=False):
     from pmpm.build import build_solver
     from pmpm.benchmarks.block import block_scene
     for shape in ("cubic", "quadratic", "linear"):
-        for scheme in ("musl", "usl", "usf"):
+        for scheme in ("musl", "usl", "usf", "mls"):
             for loads in (False, True):
                 s = build_solver(block_scene(400, shape, scheme, gravity=loads, force=loads), MPI.COMM_SELF)
                 for _ in range(2):

@@ -20,7 +20,7 @@ Two problems, each run in-process on one rank (``build_solver(scene, MPI.COMM_SE
   the finest cell size of the sweep).
 
 The sweep varies the shape function (linear, quadratic, cubic B-spline), particles per cell per
-axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL) at CFL 0.5; then the CFL
+axis (1, 2, 3), cell size (halvings) and scheme (USF, USL, MUSL, MLS-MPM) at CFL 0.5; then the CFL
 number alone (0.3 ... 0.9 and the largest stable, by bisection: studies/accuracy_cfl.py).
 The bar is a full factorial (it is cheap). The frame is not (the finest runs take many minutes
 each): every shape at every cell size with 2 x 2 particles and MUSL; the full factorial over
@@ -65,7 +65,7 @@ __all__ = ["add_arguments", "accuracy", "study", "bar_scene", "run_bar", "frame_
            "convergence_orders", "pareto_front", "equal_time_comparison", "recommendations"]
 
 SHAPES = ("linear", "quadratic", "cubic")
-SCHEMES = ("usf", "usl", "musl")
+SCHEMES = ("usf", "usl", "musl", "mls")
 PPCS = (1, 2, 3)
 
 # -- the bar (tests/verification/test_bar.py) -------------------------------------------------
@@ -542,7 +542,7 @@ def write_plot(rows, path, clock="wall_s"):
         return
     fig, axes = plt.subplots(1, len(problems), figsize=(6.5 * len(problems), 5.2), squeeze=False)
     colors = {"linear": "tab:blue", "quadratic": "tab:orange", "cubic": "tab:green"}
-    markers = {"musl": "o", "usl": "s", "usf": "^"}
+    markers = {"musl": "o", "usl": "s", "usf": "^", "mls": "D"}
     sizes = {1: 18, 2: 40, 3: 75}
     for ax, problem in zip(axes[0], problems):
         pts = [r for r in rows if r["problem"] == problem and r["status"] == "ok" and r.get("error")]

@@ -66,6 +66,8 @@ class Setting:
             return (f"{self.cell:g} m {self.shape} {self.ppc}x{self.ppc} implicit dt = T1/"
                     f"{FE_PERIOD_NOMINAL / self.time_step:.0f} ({1e3 * self.time_step:.3g} ms)")
         t = f"xpic({self.xpic_order})" if self.transfer == "xpic" else self.transfer
+        if self.scheme == "mls":   # the scheme brings its affine transfer (pmpm.core.mls)
+            t = "affine"
         return f"{self.cell:g} m {self.shape} {self.ppc}x{self.ppc} {self.scheme.upper()} CFL {self.cfl:g} {t.upper()}"
 
 
@@ -79,10 +81,12 @@ FULL = (BASE, dataclasses.replace(BASE, cfl=0.5), dataclasses.replace(BASE, cfl=
         dataclasses.replace(BASE, shape="quadratic"), dataclasses.replace(BASE, transfer="apic"),
         dataclasses.replace(BASE, transfer="xpic", xpic_order=2), dataclasses.replace(BASE, ppc=3),
         dataclasses.replace(BASE, cell=1 / 30), dataclasses.replace(BASE, cell=0.025),
-        dataclasses.replace(BASE, cell=0.025, shape="quadratic", cfl=1.0))
+        dataclasses.replace(BASE, cell=0.025, shape="quadratic", cfl=1.0),
+        dataclasses.replace(BASE, scheme="mls"), dataclasses.replace(BASE, scheme="mls", shape="quadratic"))
 QUICK_CELL = 0.1
 QUICK = (dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3), dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, transfer="apic"),
-         dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, transfer="xpic"))
+         dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, transfer="xpic"),
+         dataclasses.replace(BASE, cell=QUICK_CELL, ppc=3, scheme="mls"))
 QUICK_T_END, QUICK_FE_LEVEL = 0.05, 1
 #: ``--implicit``: the main job's explicit setting, then the implicit integrator at T1/20 ...
 #: T1/400 on the same grid (issue 37), for the cost side by side

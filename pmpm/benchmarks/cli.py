@@ -27,7 +27,7 @@ def add_bench_parser(sub):
     t.add_argument("--repeat", type=_positive, default=5, help="number of timed repeats (default 5)")
     t.add_argument("--shape", default="cubic", choices=["linear", "quadratic", "cubic"],
                    help="B-spline shape functions (default cubic)")
-    t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl"],
+    t.add_argument("--scheme", default="musl", choices=["usf", "usl", "musl", "mls"],
                    help="update scheme (default musl)")
     t.add_argument("--material", default="elastic", choices=sorted(MATERIALS),
                    help="material of the block (default elastic)")

@@ -13,6 +13,7 @@ import contextlib
 import time
 
 from pmpm.core import kernels as K
+import pmpm.core.mls as mls_module
 import pmpm.core.solver as solver_module
 
 __all__ = ["phase_times", "PHASE_KERNELS"]
@@ -53,6 +54,8 @@ def phase_times(solver, steps):
     with contextlib.ExitStack() as stack:
         for name in PHASE_KERNELS:
             stack.enter_context(_timed(K, name, totals))
+        for name in ("p2g_mls", "g2p_mls"):   # the MLS scheme's transfer calls its kernels by name
+            stack.enter_context(_timed(mls_module, name, totals))
         for material in solver.materials:
             stack.enter_context(_timed(material, "update_stress", totals))
         stack.enter_context(_timed(solver_module, "wait_all", totals))   # the step-end reduction

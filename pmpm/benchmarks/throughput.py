@@ -91,10 +91,20 @@ def step_bytes_per_particle(solver):
         (("x", "m", "vol", "strain", "F", "vol0"), ("x", "vol", "strain", "F")),  # update_strain
         (("stress", "vol") + reads_F, ("stress",) + reads_F),                 # update_stress
     ]
+    grid_passes = 6   # reset, scatter x2, update, velocity, gather
+    if solver.scheme.name == "mls":   # one P2G, one G2P that also takes the strain (pmpm.core.mls)
+        size.setdefault("C", 0)
+        passes = [
+            (("x", "m", "v", "C", "vol", "stress"), ()),                      # particles_to_grid
+            (("x", "v", "C", "vol", "strain", "F", "vol0"), ("v", "C", "vol", "strain", "F")),  # g2p
+            (("x",), ("x",)),                                                 # move_particles
+            (("stress", "vol") + reads_F, ("stress",) + reads_F),             # update_stress
+        ]
+        grid_passes = 4   # reset, scatter, update, gather
     scratch = 16 + 16 + 24 + 24 + 24  # dx written and read, de written and read twice
     particle = sum(size[f] for r, w in passes for f in r + w) + scratch
     grid_nodes = solver.window.G.shape[0] * solver.window.G.shape[1]
-    grid = grid_nodes * solver.window.G.shape[2] * 8 * 6 / p.n  # reset, scatter x2, update, velocity, gather
+    grid = grid_nodes * solver.window.G.shape[2] * 8 * grid_passes / p.n
     return particle + grid
 
 

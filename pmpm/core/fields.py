@@ -66,13 +66,16 @@ class GridFields:
         for after in s._hooks["after_grid_velocity"]:
             after(s, target)
 
-    def grid_to_particles(self, s, remap):
+    def grid_to_particles(self, s, remap, strain=False):
         """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
-        also re-maps their momenta."""
-        p = s.particles
-        s._dx = s._scratch("_dx_buf", (p.n, 2))
-        vmax, bad = s.transfer.g2p(s._step_context(), remap)
-        s._vmax_local, s._bad_local = vmax, bad
+        also re-maps their momenta. ``strain``: the transfer gathers the strain increment,
+        volume and F in the same pass (MLS-MPM: (strain, de, dw, F, vol0, dq) in its context)."""
+        s.new_moves()
+        kinematics = None
+        if strain:
+            kinematics = (s.particles.fields.get("strain"),) + s._kinematics_outputs()
+        vmax, bad = s.transfer.g2p(s._step_context(kinematics=kinematics), remap)
+        s.report_speed(vmax, bad)
         for after in s._hooks["after_g2p"]:   # held particles
             after(s)
 

@@ -34,6 +34,7 @@ from pmpm.core.effects import EffectList, energy_terms
 from pmpm.core.fields import GridFields
 from pmpm.core.grid import GridWindow, choose_tile
 from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, shape_argument
+from pmpm.core.step import SchemeContext
 from pmpm.core.transfers import StepContext
 from pmpm.errors import ParticleExitError, UnstableRunError
 
@@ -223,12 +224,23 @@ class Solver:
         w, g = self.window, self.grid
         return (w.G, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], self.shape)
 
-    def _step_context(self, forces=False):
+    @property
+    def geometry(self):
+        """The transfer kernels' grid arguments (G, ox, oy, origin, inv_h, ncx, ncy, shape)."""
+        return self._geometry()
+
+    @property
+    def owned_local(self):
+        """The owned node range of the window: (slab axis, first, end) in window indices."""
+        return self._owned_local
+
+    def _step_context(self, forces=False, kinematics=None):
         """What the transfer sees of this step (pmpm.core.transfers.StepContext): the force
-        pass's stress and body acceleration when ``forces``."""
+        pass's stress and body acceleration when ``forces``; the strain outputs
+        (``kinematics``) when the transfer gathers the strain in its velocity pass."""
         return StepContext(self.particles, self.window, self._geometry(), self.decomp.sum_halo,
                            self.force_stress() if forces else None, self.gravity if forces else None,
-                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0))
+                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0), kinematics)
 
     def _scratch(self, name, shape):
         arr = getattr(self, name, None)
@@ -236,6 +248,20 @@ class Solver:
             arr = np.empty(shape)
             setattr(self, name, arr)
         return arr
+
+    def scratch(self, name, shape):
+        """A float array of ``shape`` kept between steps under ``name`` (a scheme's buffers)."""
+        return self._scratch("_scheme_" + name, shape)
+
+    def new_moves(self):
+        """The particles' moves of this step (N, 2), filled by grid-to-particles."""
+        self._dx = self._scratch("_dx_buf", (self.particles.n, 2))
+        return self._dx
+
+    def report_speed(self, vmax, bad):
+        """This rank's largest particle speed and count of non-finite particles after the
+        velocity update, reduced at the step's end (``_check_and_next_dt``)."""
+        self._vmax_local, self._bad_local = vmax, bad
 
     # -- the phases (the grid's share is the run's grid fields: pmpm.core.fields) --------------
     def reset_grid(self):
@@ -273,9 +299,14 @@ class Solver:
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         self.grid_fields.grid_velocity(self, source, target)
 
-    def grid_to_particles(self, remap):
-        """Step 9 / eq. 5: particle velocities (and MUSL's re-map of their momenta)."""
-        self.grid_fields.grid_to_particles(self, remap)
+    def grid_to_particles(self, remap, strain=False):
+        """Step 9 / eq. 5: particle velocities (and MUSL's re-map of their momenta; with
+        ``strain``, the strain increment, volume and F of a transfer that gathers them in the
+        same pass)."""
+        if strain:
+            self.grid_fields.grid_to_particles(self, remap, strain=True)
+        else:
+            self.grid_fields.grid_to_particles(self, remap)
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
@@ -467,7 +498,7 @@ class Solver:
         if 0 < remaining < dt:  # land on the end time exactly
             dt = remaining
         self._dt_step = dt
-        self.scheme.advance(self, dt)
+        self.scheme.advance(SchemeContext(self, dt))
         energy_due = (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0
         bad, outside, leaving, sums = self._check_and_next_dt(energy_due)
         if bad:

@@ -41,13 +41,19 @@ class StepContext:
         The particles' moves of the step, filled by grid-to-particles.
     dt : float
         The step's time step.
+    kinematics : tuple or None
+        (strain, de, dw, F, vol0, dq): the strain outputs of pmpm.core.kernels.transfer's
+        ``strain_increment`` when the scheme asks grid-to-particles to gather the strain in the
+        same pass (MLS-MPM); None otherwise.
     """
 
-    __slots__ = ("particles", "window", "geometry", "sum_halo", "stress", "gravity", "dx", "dt")
+    __slots__ = ("particles", "window", "geometry", "sum_halo", "stress", "gravity", "dx", "dt", "kinematics")
 
-    def __init__(self, particles, window, geometry, sum_halo, stress=None, gravity=None, dx=None, dt=0.0):
+    def __init__(self, particles, window, geometry, sum_halo, stress=None, gravity=None, dx=None, dt=0.0,
+                 kinematics=None):
         self.particles, self.window, self.geometry, self.sum_halo = particles, window, geometry, sum_halo
         self.stress, self.gravity, self.dx, self.dt = stress, gravity, dx, dt
+        self.kinematics = kinematics
 
 
 class Transfer:

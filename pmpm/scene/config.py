@@ -24,6 +24,7 @@ from pmpm.scene.limits import (MAX_XPIC_ORDER, check_memory, check_override_dept
 from pmpm.scene.names import check_name, check_output_directory, check_output_files
 from pmpm.scene.tables import MAX_MAGNITUDE, REQUIRED, Table
 from pmpm.physics.timefunctions import parse_time_function
+from pmpm.core.schemes import make_scheme, selectable_scheme_names
 from pmpm.core.shape import GIMP_INTERPOLATIONS, GIMP_SHAPES, INTERPOLATIONS
 from pmpm.scene.frame import expand_frame
 from pmpm.scene.grid import GridConfig, parse_grid
@@ -35,7 +36,7 @@ __all__ = ["Scene", "load_scene", "resolve_scenes", "check_run_names", "check_wr
 logger = logging.getLogger(__name__)
 
 SHAPE_NAMES = ("linear", "quadratic", "cubic")
-SCHEME_NAMES = ("usf", "usl", "musl")
+SCHEME_NAMES = selectable_scheme_names()   # the registry (pmpm.core.schemes): usf, usl, musl, mls
 BODY_SHAPES = ("rectangle", "polygon", "circle", "i_section", "mesh")
 BC_TYPES = ("fixed", "roller_x", "roller_y", "velocity")
 BOUNDARY_FACES = ("left", "right", "bottom", "top")
@@ -628,6 +629,8 @@ def _solver(t):
                                                   f"interpolation = {s.interpolation!r}")
         if s.pic_blend:
             raise ConfigError(t.path("pic_blend"), "is FLIP's; apic updates the velocity from the grid alone")
+    if s.scheme in SCHEME_NAMES:   # the scheme checks the settings it cannot run with (pmpm.core.schemes)
+        make_scheme(s.scheme, s)
     if s.interpolation in GIMP_INTERPOLATIONS and s.shape_function not in GIMP_SHAPES:
         raise ConfigError(t.path("interpolation"), f"{s.interpolation} is defined for shape_function "
                                                    f"{' or '.join(map(repr, GIMP_SHAPES))}, not {s.shape_function!r}")

@@ -10,6 +10,7 @@ from mpi4py import MPI
 from pmpm.core import kernels as K
 from pmpm.core.kernels.reference import basis_matrix, g2p_kinematics_reference, p2g_reference
 from pmpm.build import build_solver
+from pmpm.core.step import SchemeContext
 from pmpm.scene.config import parse_scene
 
 ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
@@ -73,7 +74,7 @@ def test_musl_strain_comes_from_the_remapped_momenta():
     x0, vol0 = p["x"].copy(), p["vol"].copy()
     dt = s.dt
     s._dt_step = dt
-    s.scheme.advance(s, dt)
+    s.scheme.advance(SchemeContext(s, dt))
     N, _ = basis_matrix(3, x0, s.grid.origin, H, CELLS)
     mass = np.einsum("pij,p->ij", N, p["m"])
     mom = np.einsum("pij,p,pd->ijd", N, p["m"], p["v"])  # p["v"]: the updated particle velocities

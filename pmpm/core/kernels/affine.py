@@ -23,14 +23,113 @@ refused by the scene (their D_p vanishes when a particle sits on a node).
 """
 import numba as nb
 
-from pmpm.core.kernels.transfer import _block_weights, _buffers, _external_force
-from pmpm.core.shape import BLOCK, stencil
+from pmpm.core.kernels.transfer import (block_buffers, block_start, particle_forces, scatter2, scatter_p2g,
+                                        speed_check)
+from pmpm.core.shape import BLOCK
 
-__all__ = ["p2g_affine", "g2p_affine", "D_FLOOR"]
+__all__ = ["p2g_affine", "g2p_affine", "D_FLOOR", "affine_momentum", "affine_moments", "gather_affine",
+           "affine_matrix", "cell_position", "store_velocity_update"]
 
 #: det D_p (cells^4) below which a particle keeps no affine velocity: D_p vanishes on a grid edge
 #: (1e-12: D_xx ~ s^2 within s cells of the edge, so particles closer than ~1e-6 cells)
 D_FLOOR = 1e-12
+
+
+@nb.njit(cache=True, inline="always")
+def cell_position(x, p, origin, inv_h):
+    """Particle p's position in cells from the grid origin (sx, sy)."""
+    return (x[p, 0] - origin[0]) * inv_h, (x[p, 1] - origin[1]) * inv_h
+
+
+@nb.njit(cache=True, inline="always")
+def affine_momentum(p, x, m, C, origin, inv_h, h):
+    """(m_p, affine): particle p's mass and the affine part of its momentum for
+    pmpm.core.kernels.transfer.scatter_p2g, m C in momentum per cell of offset with its
+    position in cells (kxx, kxy, kyx, kyy, sx, sy)."""
+    mp = m[p]
+    sx, sy = cell_position(x, p, origin, inv_h)
+    return mp, (mp * C[p, 0] * h, mp * C[p, 1] * h, mp * C[p, 2] * h, mp * C[p, 3] * h, sx, sy)
+
+
+@nb.njit(cache=True, inline="always")
+def _moments_1d(first, W, q, K, s):
+    """(sum_a w_a d_a, sum_a w_a d_a^2) along one axis, d_a = first + a - s (cells)."""
+    mean = 0.0
+    second = 0.0
+    for a in range(K):
+        d = first + a - s
+        mean += W[a, q] * d
+        second += W[a, q] * d * d
+    return mean, second
+
+
+@nb.njit(cache=True, inline="always")
+def affine_moments(q, K, I0, J0, WX, WY, sx, sy):
+    """D_p = sum_i N_i (x_i - x_p)(x_i - x_p)^T of particle q in cells^2, (D_xx, D_yy, D_xy),
+    from the 1-D weights (each axis' weights sum to 1, so D_xy is the product of the means)."""
+    mx, dxx = _moments_1d(I0[q], WX, q, K, sx)
+    my, dyy = _moments_1d(J0[q], WY, q, K, sy)
+    return dxx, dyy, mx * my
+
+
+@nb.njit(cache=True, inline="always")
+def gather_affine(G, f, q, K, I0, J0, WX, WY, ox, oy, sx, sy):
+    """v_p = sum_i N_i v_i and B_p = sum_i N_i v_i (x_i - x_p)^T (cells) of particle q, v the
+    grid vector in fields f, f + 1: (vx, vy, bxx, bxy, byx, byy)."""
+    vx = 0.0
+    vy = 0.0
+    bxx = 0.0
+    bxy = 0.0
+    byx = 0.0
+    byy = 0.0
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
+    for a in range(K):
+        ii = i0 + a - ox
+        wa = WX[a, q]
+        ddx = i0 + a - sx
+        for b in range(K):
+            jj = j0 + b - oy
+            w = wa * WY[b, q]
+            ddy = j0 + b - sy
+            gvx = w * G[ii, jj, f]
+            gvy = w * G[ii, jj, f + 1]
+            vx += gvx
+            vy += gvy
+            bxx += gvx * ddx
+            bxy += gvx * ddy
+            byx += gvy * ddx
+            byy += gvy * ddy
+    return vx, vy, bxx, bxy, byx, byy
+
+
+@nb.njit(cache=True, inline="always")
+def affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, scale):
+    """C = B D^-1 times ``scale`` (inv_h: per metre). D is symmetric positive definite except
+    for a particle on the grid's edge, whose edge node takes all its weight along that axis
+    (D_xx or D_yy = 0): it sees no affine field and keeps none (PIC there)."""
+    det = dxx * dyy - dxy * dxy
+    r = scale / det if det > D_FLOOR else 0.0
+    return ((bxx * dyy - bxy * dxy) * r, (bxy * dxx - bxx * dxy) * r,
+            (byx * dyy - byy * dxy) * r, (byy * dxx - byx * dxy) * r)
+
+
+@nb.njit(cache=True, inline="always")
+def store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad):
+    """Particle p's new velocity and affine matrix into ``v`` and ``C``, its move dt v into
+    ``dx``; returns the running largest squared speed and count of non-finite particles."""
+    C[p, 0] = cxx
+    C[p, 1] = cxy
+    C[p, 2] = cyx
+    C[p, 3] = cyy
+    dx[p, 0] = dt * vx
+    dx[p, 1] = dt * vy
+    v[p, 0] = vx
+    v[p, 1] = vy
+    vmax2, bad = speed_check(vx, vy, vmax2, bad)
+    if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
+        bad += 1
+    return vmax2, bad
 
 
 @nb.njit(cache=True)
@@ -40,54 +139,16 @@ def p2g_affine(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     in 1/s), the internal force (``stress`` not None) and the external force into ``G``, as
     pmpm.core.kernels.transfer.p2g with ``v`` given."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
-    n = x.shape[0]
-    for p0 in range(0, n, BLOCK):
-        nq = min(BLOCK, n - p0)
-        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+    for p0 in range(0, x.shape[0], BLOCK):
+        nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
-            mp = m[p]
-            sx = (x[p, 0] - origin[0]) * inv_h
-            sy = (x[p, 1] - origin[1]) * inv_h
-            mvx = mp * v[p, 0]
-            mvy = mp * v[p, 1]
-            # m C in momentum per metre of offset
-            cxx = mp * C[p, 0] * h
-            cxy = mp * C[p, 1] * h
-            cyx = mp * C[p, 2] * h
-            cyy = mp * C[p, 3] * h
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            if stress is not None:
-                c = -vol[p] * inv_h
-                sxx = c * stress[p, 0]
-                syy = c * stress[p, 1]
-                sxy = c * stress[p, 2]
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                ga = WX[K + a, q]
-                ddx = I0[q] + a - sx           # x_i - x_p in cells
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    wb = WY[b, q]
-                    w = wa * wb
-                    ddy = J0[q] + b - sy
-                    G[ii, jj, 0] += w * mp
-                    G[ii, jj, 1] += w * (mvx + cxx * ddx + cxy * ddy)
-                    G[ii, jj, 2] += w * (mvy + cyx * ddx + cyy * ddy)
-                    if with_force:
-                        fnx = w * fx
-                        fny = w * fy
-                        if stress is not None:
-                            dnx = ga * wb
-                            dny = wa * WY[K + b, q]
-                            fnx += sxx * dnx + sxy * dny
-                            fny += sxy * dnx + syy * dny
-                        G[ii, jj, 3] += fnx
-                        G[ii, jj, 4] += fny
+            mp, affine = affine_momentum(p, x, m, C, origin, inv_h, h)
+            fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
+            scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
+                        with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
 
 
 @nb.njit(cache=True)
@@ -98,93 +159,19 @@ def g2p_affine(x, m, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx,
     speed and the number of particles whose new velocity or affine matrix is not finite."""
     vmax2 = 0.0
     bad = 0
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
-    n = x.shape[0]
-    for p0 in range(0, n, BLOCK):
-        nq = min(BLOCK, n - p0)
-        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+    for p0 in range(0, x.shape[0], BLOCK):
+        nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
-            sx = (x[p, 0] - origin[0]) * inv_h
-            sy = (x[p, 1] - origin[1]) * inv_h
-            # D from the 1-D weights (partition of unity along each axis)
-            mx = 0.0
-            dxx = 0.0
-            for a in range(K):
-                d = I0[q] + a - sx
-                mx += WX[a, q] * d
-                dxx += WX[a, q] * d * d
-            my = 0.0
-            dyy = 0.0
-            for b in range(K):
-                d = J0[q] + b - sy
-                my += WY[b, q] * d
-                dyy += WY[b, q] * d * d
-            dxy = mx * my
-            vx = 0.0
-            vy = 0.0
-            bxx = 0.0
-            bxy = 0.0
-            byx = 0.0
-            byy = 0.0
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                ddx = I0[q] + a - sx
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    w = wa * WY[b, q]
-                    ddy = J0[q] + b - sy
-                    gvx = w * G[ii, jj, 1]
-                    gvy = w * G[ii, jj, 2]
-                    vx += gvx
-                    vy += gvy
-                    bxx += gvx * ddx
-                    bxy += gvx * ddy
-                    byx += gvy * ddx
-                    byy += gvy * ddy
-            # C = B D^-1 (cells), then per metre; D is symmetric positive definite except for a
-            # particle on the grid's edge, whose edge node takes all its weight along that axis
-            # (D_xx or D_yy = 0): it sees no affine field and keeps none (PIC there)
-            det = dxx * dyy - dxy * dxy
-            r = inv_h / det if det > D_FLOOR else 0.0
-            cxx = (bxx * dyy - bxy * dxy) * r
-            cxy = (bxy * dxx - bxx * dxy) * r
-            cyx = (byx * dyy - byy * dxy) * r
-            cyy = (byy * dxx - byx * dxy) * r
-            C[p, 0] = cxx
-            C[p, 1] = cxy
-            C[p, 2] = cyx
-            C[p, 3] = cyy
-            dx[p, 0] = dt * vx
-            dx[p, 1] = dt * vy
-            v[p, 0] = vx
-            v[p, 1] = vy
-            speed2 = vx * vx + vy * vy
-            if speed2 > vmax2:
-                vmax2 = speed2
-            elif not speed2 < 1e300:  # NaN or inf
-                bad += 1
-            if not abs(cxx) + abs(cxy) + abs(cyx) + abs(cyy) < 1e300:
-                bad += 1
+            sx, sy = cell_position(x, p, origin, inv_h)
+            dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
+            vx, vy, bxx, bxy, byx, byy = gather_affine(G, 1, q, K, I0, J0, WX, WY, ox, oy, sx, sy)
+            cxx, cxy, cyx, cyy = affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, inv_h)
+            vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             if remap:
                 mp = m[p]
-                mvx = mp * vx
-                mvy = mp * vy
-                kxx = mp * cxx * h
-                kxy = mp * cxy * h
-                kyx = mp * cyx * h
-                kyy = mp * cyy * h
-                for a in range(K):
-                    ii = I0[q] + a - ox
-                    wa = WX[a, q]
-                    ddx = I0[q] + a - sx
-                    for b in range(K):
-                        jj = J0[q] + b - oy
-                        w = wa * WY[b, q]
-                        ddy = J0[q] + b - sy
-                        G[ii, jj, 5] += w * (mvx + kxx * ddx + kxy * ddy)
-                        G[ii, jj, 6] += w * (mvy + kyx * ddx + kyy * ddy)
+                scatter2(G, 5, q, K, I0, J0, WX, WY, ox, oy, mp * vx, mp * vy,
+                         (mp * cxx * h, mp * cxy * h, mp * cyx * h, mp * cyy * h, sx, sy))
     return vmax2 ** 0.5, bad

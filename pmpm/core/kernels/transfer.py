@@ -134,7 +134,7 @@ def _buffers(shape):
 @nb.njit(cache=True, inline="always")
 def gather2(G, f, q, K, I0, J0, WX, WY, ox, oy):
     """(sum_i N_i G_i[f], sum_i N_i G_i[f + 1]) over particle q's stencil (its block weights):
-    the one gather loop of the point kernels (FLIP's and XPIC's)."""
+    the gather loop of one grid vector (XPIC's smoothing pass, MLS-MPM's linear velocity)."""
     ux = 0.0
     uy = 0.0
     for a in range(K):
@@ -149,17 +149,122 @@ def gather2(G, f, q, K, I0, J0, WX, WY, ox, oy):
 
 
 @nb.njit(cache=True, inline="always")
-def scatter2(G, f, q, K, I0, J0, WX, WY, ox, oy, ax, ay):
-    """G_i[f] += N_i ax, G_i[f + 1] += N_i ay over particle q's stencil: the one scatter loop of
-    a particle's vector (the MUSL re-map, XPIC's smoothing pass)."""
+def gather4(G, f, g, q, K, I0, J0, WX, WY, ox, oy):
+    """The gather of two grid vectors in one loop: sum_i N_i G_i[f, f + 1] and
+    sum_i N_i G_i[g, g + 1] (FLIP: the velocity and its change)."""
+    vx = 0.0
+    vy = 0.0
+    dvx = 0.0
+    dvy = 0.0
     for a in range(K):
         ii = I0[q] + a - ox
         wa = WX[a, q]
         for b in range(K):
             jj = J0[q] + b - oy
             w = wa * WY[b, q]
-            G[ii, jj, f] += w * ax
-            G[ii, jj, f + 1] += w * ay
+            vx += w * G[ii, jj, f]
+            vy += w * G[ii, jj, f + 1]
+            dvx += w * G[ii, jj, g]
+            dvy += w * G[ii, jj, g + 1]
+    return vx, vy, dvx, dvy
+
+
+@nb.njit(cache=True, inline="always")
+def gather_gradient(G, f, q, K, I0, J0, WX, WY, ox, oy):
+    """L = sum_i v_i (x) grad N_i in cell units (lxx, lxy, lyx, lyy), v the grid vector in
+    fields f, f + 1: the velocity gradient of the strain increment."""
+    lxx = 0.0
+    lxy = 0.0
+    lyx = 0.0
+    lyy = 0.0
+    for a in range(K):
+        ii = I0[q] + a - ox
+        wa = WX[a, q]
+        ga = WX[K + a, q]
+        for b in range(K):
+            jj = J0[q] + b - oy
+            dnx = ga * WY[b, q]
+            dny = wa * WY[K + b, q]
+            gvx = G[ii, jj, f]
+            gvy = G[ii, jj, f + 1]
+            lxx += gvx * dnx
+            lxy += gvx * dny
+            lyx += gvy * dnx
+            lyy += gvy * dny
+    return lxx, lxy, lyx, lyy
+
+
+@nb.njit(cache=True, inline="always")
+def scatter2(G, f, q, K, I0, J0, WX, WY, ox, oy, ax, ay, affine):
+    """G_i[f] += N_i ax, G_i[f + 1] += N_i ay over particle q's stencil: the scatter loop of a
+    particle's vector (the MUSL re-map, XPIC's smoothing pass). With ``affine`` (kxx, kxy,
+    kyx, kyy, sx, sy) not None the vector has an affine part: a + k (x_i - x_p), k per cell of
+    offset, (sx, sy) the particle's position in cells (the APIC re-map)."""
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
+    for a in range(K):
+        ii = i0 + a - ox
+        wa = WX[a, q]
+        for b in range(K):
+            jj = j0 + b - oy
+            w = wa * WY[b, q]
+            if affine is None:
+                G[ii, jj, f] += w * ax
+                G[ii, jj, f + 1] += w * ay
+            else:
+                ddx = i0 + a - affine[4]   # x_i - x_p in cells
+                ddy = j0 + b - affine[5]
+                G[ii, jj, f] += w * (ax + affine[0] * ddx + affine[1] * ddy)
+                G[ii, jj, f + 1] += w * (ay + affine[2] * ddx + affine[3] * ddy)
+
+
+@nb.njit(cache=True, inline="always")
+def scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, mass, mp, mvx, mvy, affine,
+                force, fx, fy, stress, sxx, syy, sxy, mls):
+    """Particle q's particle-to-grid scatter over its stencil, the one loop of the point
+    kernels (FLIP's, APIC's, MLS-MPM's): with ``mass``, m N_i into field 0 and the momentum
+    N_i (m v + k (x_i - x_p)) into 1, 2 (``affine`` as in :func:`scatter2`, None: no affine
+    part); with ``force``, N_i f_ext + (sxx, sxy; sxy, syy) g_i into 3, 4 (``stress``: with
+    the stress term), g_i the gradient grad N_i in cell units. With ``mls`` (axx, axy, ayx,
+    ayy) not None (and ``affine`` given) the stress term is MLS-MPM's, N_i A (x_i - x_p) with
+    A = (sxx, sxy; sxy, syy) D^-1 computed once per particle (the force in the form of the
+    affine momentum: g_i = N_i D^-1 (x_i - x_p))."""
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
+    for a in range(K):
+        ii = i0 + a - ox
+        wa = WX[a, q]
+        ga = WX[K + a, q]
+        for b in range(K):
+            jj = j0 + b - oy
+            wb = WY[b, q]
+            w = wa * wb
+            if mass:
+                G[ii, jj, 0] += w * mp
+                if affine is None:
+                    G[ii, jj, 1] += w * mvx
+                    G[ii, jj, 2] += w * mvy
+                else:
+                    ddx = i0 + a - affine[4]
+                    ddy = j0 + b - affine[5]
+                    G[ii, jj, 1] += w * (mvx + affine[0] * ddx + affine[1] * ddy)
+                    G[ii, jj, 2] += w * (mvy + affine[2] * ddx + affine[3] * ddy)
+            if force:
+                if mls is None:
+                    fnx = w * fx
+                    fny = w * fy
+                    if stress:
+                        dnx = ga * wb
+                        dny = wa * WY[K + b, q]
+                        fnx += sxx * dnx + sxy * dny
+                        fny += sxy * dnx + syy * dny
+                else:
+                    ex = i0 + a - affine[4]
+                    ey = j0 + b - affine[5]
+                    fnx = w * (fx + mls[0] * ex + mls[1] * ey)
+                    fny = w * (fy + mls[2] * ex + mls[3] * ey)
+                G[ii, jj, 3] += fnx
+                G[ii, jj, 4] += fny
 
 
 @nb.njit(cache=True, inline="always")
@@ -175,52 +280,74 @@ def _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
     block_weights(shape, s, L, nq, ncy, J0, WY)
 
 
+@nb.njit(cache=True, inline="always")
+def block_start(x, p0, origin, inv_h, ncx, ncy, shape, B):
+    """The block of particles from p0 (``B`` from :func:`_buffers`): its weights evaluated;
+    returns its particle count."""
+    nq = min(BLOCK, x.shape[0] - p0)
+    _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, B[0], B[1], B[2], B[3], B[4])
+    return nq
+
+
+@nb.njit(cache=True, inline="always")
+def internal_force_stress(p, vol, stress, inv_h):
+    """-V sigma / h of particle p (xx, yy, xy): times a gradient in cell units, its force."""
+    c = -vol[p] * inv_h
+    return c * stress[p, 0], c * stress[p, 1], c * stress[p, 2]
+
+
+@nb.njit(cache=True, inline="always")
+def particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h):
+    """Particle p's external force and its -V sigma / h: (fx, fy, sxx, syy, sxy), the stress
+    part zero when ``stress`` is None (a pass without internal forces)."""
+    fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    if stress is not None:
+        # f_int = -V sigma . grad N  (gradient in cell units times 1/h)
+        sxx, syy, sxy = internal_force_stress(p, vol, stress, inv_h)
+    return fx, fy, sxx, syy, sxy
+
+
+@nb.njit(cache=True, inline="always")
+def block_buffers(shape):
+    """(K, B, I0, J0, WX, WY): the stencil width and the per-block scratch of :func:`_buffers`
+    with its first nodes and weights unpacked."""
+    B = _buffers(shape)
+    return stencil(shape), B, B[1], B[2], B[3], B[4]
+
+
+@nb.njit(cache=True, inline="always")
+def speed_check(vx, vy, vmax2, bad):
+    """The running largest squared speed and count of non-finite velocities with (vx, vy)."""
+    speed2 = vx * vx + vy * vy
+    if speed2 > vmax2:
+        vmax2 = speed2
+    elif not speed2 < 1e300:  # NaN or inf
+        bad += 1
+    return vmax2, bad
+
+
 def _p2g_point(x, m, v, vol, stress, gravity, load_id, load_w, load_vec,
                G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Scatter mass and momentum (``v`` not None), internal force (``stress`` not None) and
     external force (``gravity``/``load_id`` not None) into the grid window ``G``."""
     with_force = stress is not None or gravity is not None or load_id is not None
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
-    n = x.shape[0]
-    for p0 in range(0, n, BLOCK):
-        nq = min(BLOCK, n - p0)
-        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
+    for p0 in range(0, x.shape[0], BLOCK):
+        nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
             mp = m[p]
+            mvx = 0.0
+            mvy = 0.0
             if v is not None:
                 mvx = mp * v[p, 0]
                 mvy = mp * v[p, 1]
-            fx, fy = _external_force(p, m, gravity, load_id, load_w, load_vec)
-            if stress is not None:
-                # f_int = -V sigma . grad N  (gradient in cell units times 1/h)
-                c = -vol[p] * inv_h
-                sxx = c * stress[p, 0]
-                syy = c * stress[p, 1]
-                sxy = c * stress[p, 2]
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                ga = WX[K + a, q]
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    wb = WY[b, q]
-                    w = wa * wb
-                    if v is not None:
-                        G[ii, jj, 0] += w * mp
-                        G[ii, jj, 1] += w * mvx
-                        G[ii, jj, 2] += w * mvy
-                    if with_force:
-                        fnx = w * fx
-                        fny = w * fy
-                        if stress is not None:
-                            dnx = ga * wb
-                            dny = wa * WY[K + b, q]
-                            fnx += sxx * dnx + sxy * dny
-                            fny += sxy * dnx + syy * dny
-                        G[ii, jj, 3] += fnx
-                        G[ii, jj, 4] += fny
+            fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
+            scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, v is not None, mp, mvx, mvy, None,
+                        with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
 
 
 def _g2p_velocity_point(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape, remap, dx, dt):
@@ -234,41 +361,21 @@ def _g2p_velocity_point(x, m, v, pic, G, ox, oy, origin, inv_h, ncx, ncy, shape,
     vmax2 = 0.0
     bad = 0
     flip = 1.0 - pic
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
-    n = x.shape[0]
-    for p0 in range(0, n, BLOCK):
-        nq = min(BLOCK, n - p0)
-        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
+    for p0 in range(0, x.shape[0], BLOCK):
+        nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
-            dvx = 0.0
-            dvy = 0.0
-            vx = 0.0
-            vy = 0.0
-            for a in range(K):
-                ii = I0[q] + a - ox
-                wa = WX[a, q]
-                for b in range(K):
-                    jj = J0[q] + b - oy
-                    w = wa * WY[b, q]
-                    vx += w * G[ii, jj, 1]
-                    vy += w * G[ii, jj, 2]
-                    dvx += w * G[ii, jj, 3]
-                    dvy += w * G[ii, jj, 4]
+            vx, vy, dvx, dvy = gather4(G, 1, 3, q, K, I0, J0, WX, WY, ox, oy)
             dx[p, 0] = dt * vx
             dx[p, 1] = dt * vy
             nvx = flip * (v[p, 0] + dvx) + pic * vx
             nvy = flip * (v[p, 1] + dvy) + pic * vy
             v[p, 0] = nvx
             v[p, 1] = nvy
-            speed2 = nvx * nvx + nvy * nvy
-            if speed2 > vmax2:
-                vmax2 = speed2
-            elif not speed2 < 1e300:  # NaN or inf
-                bad += 1
+            vmax2, bad = speed_check(nvx, nvy, vmax2, bad)
             if remap:
-                scatter2(G, 5, q, K, I0, J0, WX, WY, ox, oy, m[p] * nvx, m[p] * nvy)
+                scatter2(G, 5, q, K, I0, J0, WX, WY, ox, oy, m[p] * nvx, m[p] * nvy, None)
     return vmax2 ** 0.5, bad
 
 
@@ -283,34 +390,16 @@ def _g2p_kinematics_point(x, m, vol, strain, de, dw, F, vol0, dq, vel_field, dx,
     rate); ``F``, ``vol0``, ``dq``: the deformation gradient, see :func:`strain_increment`.
     Returns the work of the external forces over the moves."""
     work = 0.0
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
     n = x.shape[0]
     for p0 in range(0, n, BLOCK):
         nq = min(BLOCK, n - p0)
         if de is not None:
-            _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+            block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
             if de is not None:
-                lxx = 0.0
-                lxy = 0.0
-                lyx = 0.0
-                lyy = 0.0
-                for a in range(K):
-                    ii = I0[q] + a - ox
-                    wa = WX[a, q]
-                    ga = WX[K + a, q]
-                    for b in range(K):
-                        jj = J0[q] + b - oy
-                        dnx = ga * WY[b, q]
-                        dny = wa * WY[K + b, q]
-                        gvx = G[ii, jj, vel_field]
-                        gvy = G[ii, jj, vel_field + 1]
-                        lxx += gvx * dnx
-                        lxy += gvx * dny
-                        lyx += gvy * dnx
-                        lyy += gvy * dny
+                lxx, lxy, lyx, lyy = gather_gradient(G, vel_field, q, K, I0, J0, WX, WY, ox, oy)
                 strain_increment(p, dt * inv_h, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
             if dx is not None:
                 work += move(p, x, dx, m, gravity, load_id, load_w, load_vec)

@@ -15,8 +15,8 @@ the division by the mass, the boundary values) is pmpm.core.transfers.XPIC's.
 """
 import numba as nb
 
-from pmpm.core.kernels.transfer import _block_weights, _buffers, gather2, scatter2
-from pmpm.core.shape import BLOCK, stencil
+from pmpm.core.kernels.transfer import block_buffers, block_start, gather2, scatter2
+from pmpm.core.shape import BLOCK
 
 __all__ = ["grid_particle_grid"]
 
@@ -26,13 +26,10 @@ def grid_particle_grid(x, m, U, out, ox, oy, origin, inv_h, ncx, ncy, shape):
     """out_i += sum_p S_ip m_p (sum_j S_jp U_j): the momentum of the grid field ``U``
     (window nodes x 2, m/s) interpolated to the particles and scattered back (``out``: window
     nodes x 2, kg m/s; divided by the nodal mass it is M U)."""
-    K = stencil(shape)
-    S, I0, J0, WX, WY = _buffers(shape)
-    n = x.shape[0]
-    for p0 in range(0, n, BLOCK):
-        nq = min(BLOCK, n - p0)
-        _block_weights(x, p0, nq, origin, inv_h, ncx, ncy, shape, S, I0, J0, WX, WY)
+    K, B, I0, J0, WX, WY = block_buffers(shape)
+    for p0 in range(0, x.shape[0], BLOCK):
+        nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
             p = p0 + q
             ux, uy = gather2(U, 0, q, K, I0, J0, WX, WY, ox, oy)
-            scatter2(out, 0, q, K, I0, J0, WX, WY, ox, oy, m[p] * ux, m[p] * uy)
+            scatter2(out, 0, q, K, I0, J0, WX, WY, ox, oy, m[p] * ux, m[p] * uy, None)

@@ -1,0 +1,75 @@
+"""MLS-MPM as a scheme (``solver.scheme = "mls"``; Hu et al. 2018, pmpm.core.kernels.mls).
+
+One step is one particle-to-grid pass (mass, affine momentum and the stress's force together),
+the halo exchange, the grid update, one grid-to-particle pass (velocity, affine matrix C_p and
+the strain increment, volume and F from it), the move and the stress update:
+
+    reset_grid -> particles_to_grid (mass, momentum, forces) -> exchange_halo (all)
+    -> update_grid -> grid_to_particles (v, C, d_eps, V, F, dx) -> move -> update_stress
+
+USL's order with APIC's transfer, and 2 K^2 node visits per particle-step where MUSL makes
+4 K^2. The scheme brings its transfer (``MLSTransfer``: the affine matrix C per particle);
+``solver.transfer`` stays the default. Point particles only (the MLS gradient is built from
+the B-spline weights of a point), with one grid field (no ``[contact]``).
+"""
+from pmpm.core.kernels.mls import g2p_mls, p2g_mls
+from pmpm.core.step import ALL, Scheme
+from pmpm.core.transfers import Transfer
+from pmpm.errors import ConfigError
+
+__all__ = ["MLS", "MLSTransfer"]
+
+
+class MLSTransfer(Transfer):
+    """MLS-MPM's transfer: APIC's momentum with the MLS force in p2g; in g2p the velocity,
+    C_p and (the scheme asks it: ``ctx.kinematics``) the strain in the same pass."""
+
+    name = None   # not a choice of solver.transfer: the mls scheme brings it
+    fields = {"C": (4,)}
+
+    def describe(self):
+        return ["MLS-MPM transfer (affine velocity C per particle, one P2G and one G2P)"]
+
+    def p2g(self, ctx, momentum):
+        p = ctx.particles
+        p2g_mls(p["x"], p["m"], p["v"], p["C"], p["vol"], ctx.stress,
+                ctx.gravity, None, None, None, *ctx.geometry)
+
+    def g2p(self, ctx, remap):
+        p = ctx.particles
+        strain, de, dw, F, vol0, dq = ctx.kinematics
+        return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, ctx.dx, ctx.dt,
+                       strain, de, dw, F, p["vol"], vol0, dq)
+
+
+class MLS(Scheme):
+    """MLS-MPM: one P2G and one G2P per step (USL order, APIC transfer, MLS force)."""
+
+    name = "mls"
+
+    @classmethod
+    def from_config(cls, cfg):
+        if cfg.interpolation != "point":
+            raise ConfigError("solver.scheme", f"mls is defined for point particles, not "
+                                               f"interpolation = {cfg.interpolation!r}")
+        if cfg.transfer != "flip" or cfg.pic_blend:
+            raise ConfigError("solver.transfer" if cfg.transfer != "flip" else "solver.pic_blend",
+                              "the mls scheme brings its own (affine) transfer: leave it out")
+        return cls()
+
+    def check_parts(self, effects, transfer, grid_fields):
+        if grid_fields.scene_key is not None:
+            raise ConfigError(grid_fields.scene_key, "the mls scheme runs one grid field (not with contact)")
+
+    def choose_transfer(self, transfer):
+        return MLSTransfer()
+
+    def advance(self, ctx):
+        dt = ctx.dt
+        ctx.reset_grid()
+        ctx.particles_to_grid(momentum=True, forces=True)
+        ctx.exchange_halo(ALL)
+        ctx.update_grid(dt)
+        ctx.grid_to_particles(remap=False, strain=True)
+        ctx.move_particles(dt)
+        ctx.update_stress()

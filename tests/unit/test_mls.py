@@ -1,0 +1,217 @@
+"""MLS-MPM (pmpm.core.mls, pmpm.core.kernels.mls; Hu et al. 2018): the numba kernels against
+their NumPy twins, the conservation of momentum and angular momentum off the origin, the fixed-
+free bar's period against its closed form (design.md section 7), and the scheme's refusals."""
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pmpm.build import build_solver
+from pmpm.core import kernels as K
+from pmpm.core.schemes import make_scheme
+from pmpm.core.kernels.mls import g2p_mls, p2g_mls
+from pmpm.core.kernels.reference_mls import mls_g2p_reference, mls_p2g_reference
+from pmpm.core.shape import SHAPE_TAGS
+from pmpm.errors import ConfigError
+from pmpm.scene.config import parse_scene
+
+ORDER = {"linear": 1, "quadratic": 2, "cubic": 3}
+CELLS = (9, 6)
+H = 0.25
+ORIGIN = np.array([-1.0, 0.5])
+
+
+def _particles(n=300, seed=4):
+    rng = np.random.default_rng(seed)
+    x = ORIGIN + rng.uniform(0.02, 0.98, (n, 2)) * np.array(CELLS) * H
+    x[:5, 0] = ORIGIN[0] + 0.05 * H      # near the edges: boundary-modified splines, D_p not h^2/3 I
+    x[5:10, 1] = ORIGIN[1] + (CELLS[1] - 0.05) * H
+    return {"x": x, "m": rng.uniform(0.5, 2, n), "v": rng.normal(size=(n, 2)),
+            "C": rng.normal(size=(n, 4)), "vol": rng.uniform(0.1, 0.3, n), "stress": rng.normal(size=(n, 4))}
+
+
+def _grid():
+    return np.zeros((CELLS[0] + 1, CELLS[1] + 1, K.N_FIELDS))
+
+
+@pytest.mark.parametrize("name", list(ORDER))
+def test_p2g_mls_matches_reference(name):
+    p = _particles()
+    g = np.array([0.3, -9.81])
+    G = _grid()
+    p2g_mls(p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"], g, None, None, None,
+            G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
+    mass, mom, force = mls_p2g_reference(ORDER[name], p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"],
+                                         p["m"][:, None] * g, ORIGIN, H, CELLS)
+    # tolerances: round-off of sums of ~300 terms of order one (the twin inverts D_p with LAPACK)
+    np.testing.assert_allclose(G[..., 0], mass, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(G[..., 1:3], mom, rtol=1e-11, atol=1e-11)
+    np.testing.assert_allclose(G[..., 3:5], force, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", list(ORDER))
+def test_g2p_mls_matches_reference(name):
+    p = _particles()
+    G = _grid()
+    G[..., 1:3] = np.random.default_rng(5).normal(size=G[..., 1:3].shape)
+    vel = G[..., 1:3].copy()
+    dt = 0.01
+    v, C, dx, vol = p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
+    de = np.empty((len(v), 3))
+    vmax, bad = g2p_mls(p["x"], v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
+                        dx, dt, None, de, None, None, vol, None, None)
+    vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
+    np.testing.assert_allclose(v, vp, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(C, Cp, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(de, de_ref, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(vol, vol_ref, rtol=1e-12)
+    np.testing.assert_allclose(dx, dt * vp, rtol=1e-12, atol=1e-14)
+    assert vmax == pytest.approx(np.sqrt((vp ** 2).sum(1)).max(), rel=1e-12) and bad == 0
+
+
+def _spinning_block(scheme, shape, transfer="flip"):
+    """A free elastic L-shaped body, spinning, drifting and stretching, far from the grid's
+    origin and from the point the angular momentum is taken about; no supports, no loads, no
+    mass cutoff (a node dropped by it would take momentum away)."""
+    vel = ["0.2 - 0.5 * (y - 1.1) + 0.3 * (x - 1.4)", "0.1 + 0.5 * (x - 1.4) - 0.1 * (y - 1.1)"]
+    body = {"shape": "rectangle", "material": "m", "velocity": vel}
+    return parse_scene({
+        "particles_per_cell": 2,
+        "grid": {"origin": [0.3, -0.2], "cell_size": 0.1, "cells": [30, 30]},
+        "materials": {"m": {"type": "linear_elastic", "E": 1e5, "nu": 0.3, "density": 100.0}},
+        "bodies": [{**body, "name": "a", "lower": [1.0, 0.8], "upper": [1.8, 1.2]},
+                   {**body, "name": "b", "lower": [1.0, 1.2], "upper": [1.3, 1.6]}],
+        "solver": {"end_time": 1.0, "cfl": 0.5, "scheme": scheme, "transfer": transfer,
+                   "shape_function": shape, "mass_cutoff": 0.0},
+        "output": {"fields": ["x", "v"]},
+    }, "block.toml")
+
+
+def _grid_momenta(s, o):
+    """(P_x, P_y, L about o) of a fresh particles-to-grid of momentum: the particles' momentum
+    and angular momentum, affine part included (the affine p2g conserves both)."""
+    s.reset_grid()
+    s.particles_to_grid(momentum=True, forces=False)
+    w, g = s.window, s.grid
+    X = g.origin[0] + g.h * (w.ox + np.arange(w.G.shape[0]))[:, None] - o[0]
+    Y = g.origin[1] + g.h * (w.oy + np.arange(w.G.shape[1]))[None, :] - o[1]
+    G = w.G
+    return np.array([G[..., 1].sum(), G[..., 2].sum(), np.sum(X * G[..., 2] - Y * G[..., 1])])
+
+
+@pytest.mark.parametrize("shape", ["quadratic", "cubic"])
+def test_mls_conserves_momentum_and_angular_momentum_off_the_origin(shape):
+    """The affine transfers, the grid update with the MLS force (its torque vanishes for a
+    symmetric stress: sum_i (x_i - x_p) (x) g_ip = I) and x_p += dt v_p conserve the momentum and
+    the angular momentum to round-off (Hu et al. 2018, sec. 4; Jiang et al. 2015, sec. 5), while
+    the body deforms (the stresses are not small: E = 1e5 against rho v^2 ~ 10). About
+    o = (-2, 3): away from the origin and the body, which is not symmetric. Shown to fail: with
+    the affine part left out of p2g (PIC momentum) the angular momentum drifts by ~1e-1."""
+    o = np.array([-2.0, 3.0])
+    s = build_solver(_spinning_block("mls", shape), MPI.COMM_SELF)
+    M0 = _grid_momenta(s, o)
+    worst = np.zeros(3)
+    for _ in range(150):
+        s.step()
+        worst = np.maximum(worst, np.abs(_grid_momenta(s, o) - M0))
+    assert np.abs(s.particles["stress"]).max() > 1.0   # the body really is stressed
+    scale = np.abs(M0).max()
+    # round-off: each step's sums lose ~1e-13 of the momenta to the lever arms about o (3 to 5 m
+    # against a 0.8 m body); 150 steps accumulate a few 1e-11; 1e-9 bounds that
+    assert worst.max() / scale < 1e-9, worst / scale
+
+
+def test_mls_linear_conserves_momentum():
+    """With linear B-splines the MLS force is the B-spline gradient's (sum_i grad N_i = 0):
+    the momentum is conserved to round-off. 40 steps: this stretching body's particles cross
+    cells by step ~50, where linear MPM's cell-crossing error inverts a volume (USL too).
+    Shown to fail: with the velocity gathered from the grid's velocity change (fields 3, 4,
+    FLIP's) instead of the velocity, the momentum drifts at order one."""
+    o = np.array([-2.0, 3.0])
+    s = build_solver(_spinning_block("mls", "linear"), MPI.COMM_SELF)
+    M0 = _grid_momenta(s, o)
+    worst = np.zeros(3)
+    for _ in range(40):
+        s.step()
+        worst = np.maximum(worst, np.abs(_grid_momenta(s, o) - M0))
+    assert worst[:2].max() / np.abs(M0[:2]).max() < 1e-10, worst
+
+
+# -- the fixed-free bar (design.md section 7): u = (v0 / omega) sin(omega t) sin(beta x) ------
+L_BAR, E_BAR, RHO_BAR = 25.0, 100.0, 1.0
+BETA = math.pi / (2 * L_BAR)
+OMEGA = BETA * math.sqrt(E_BAR / RHO_BAR)
+PERIOD = 2 * math.pi / OMEGA   # 10 s
+
+
+def _bar(shape, cells=50, v0=1e-3):
+    h = L_BAR / cells
+    return parse_scene({
+        "particles_per_cell": 2,
+        "grid": {"cell_size": h, "cells": [cells + 4, 3]},
+        "materials": {"bar": {"type": "linear_elastic", "E": E_BAR, "nu": 0.0, "density": RHO_BAR}},
+        "bodies": [{"shape": "rectangle", "material": "bar", "lower": [0.0, 0.0], "upper": [L_BAR, h],
+                    "velocity": [f"{v0} * sin({BETA} * x)", 0.0]}],
+        "boundary": [{"type": "fixed", "lower": [0.0, 0.0], "upper": [0.0, 3 * h]}],
+        "solver": {"shape_function": shape, "scheme": "mls", "end_time": 1.3 * PERIOD, "cfl": 0.5},
+    }, "bar.toml")
+
+
+@pytest.mark.parametrize("shape", ["linear", "quadratic", "cubic"])
+def test_mls_bar_period_and_amplitude(shape):
+    """The bar's free end crosses zero downwards at T/2 and upwards at T (T = 10 s): the
+    measured period within 1% (the bar case's accuracy standard, docs/verification.md; the
+    semi-discrete dispersion at 50 cells is ~(beta h)^2 / 12 ~ 1e-5 for B-splines), and the
+    displacement of every particle within 2% of the amplitude over 1.3 periods (APIC's velocity
+    update is PIC's plus its affine part: it loses a little energy that FLIP keeps).
+    Shown to fail: with the cubic MLS force scaled by 3/4 (D_p taken as quadratic's h^2/4 I)
+    the first crossing moves from 5 s to 5.8 s."""
+    v0 = 1e-3
+    s = build_solver(_bar(shape, v0=v0), MPI.COMM_SELF)
+    amp = v0 / OMEGA
+    x0 = s.particles["x0"][:, 0].copy()
+    end = x0 > 0.9 * L_BAR
+    t_prev, u_prev, crossings, err = 0.0, 0.0, [], 0.0
+    while s.t < 1.3 * PERIOD - 1e-12:
+        s.step()
+        p = s.particles
+        u = p["x"][:, 0] - p["x0"][:, 0]
+        err = max(err, float(np.abs(u - amp * math.sin(OMEGA * s.t) * np.sin(BETA * p["x0"][:, 0])).max()) / amp)
+        ue = float(u[p["x0"][:, 0] > 0.9 * L_BAR].mean())
+        if s.t > 0.25 * PERIOD and (ue > 0) != (u_prev > 0):
+            crossings.append(t_prev + (s.t - t_prev) * u_prev / (u_prev - ue))   # linear interpolation
+        t_prev, u_prev = s.t, ue
+    assert end.any()
+    assert len(crossings) == 2, crossings
+    period = 2 * (crossings[1] - crossings[0])
+    assert crossings[0] == pytest.approx(PERIOD / 2, rel=0.01)
+    assert period == pytest.approx(PERIOD, rel=0.01), period
+    assert err < 0.02, err
+
+
+def test_mls_refuses_what_it_cannot_run():
+    """Point particles only, its own transfer, one grid field: a scene asking otherwise gets a
+    ConfigError naming the key."""
+    base = _bar("cubic")
+    import dataclasses
+    for change, key in (({"interpolation": "gimp"}, "solver.scheme"), ({"transfer": "apic"}, "solver.transfer"),
+                        ({"pic_blend": 0.5}, "solver.pic_blend")):
+        with pytest.raises(ConfigError) as e:
+            make_scheme("mls", dataclasses.replace(base.solver, **change))
+        assert e.value.key == key
+    make_scheme("mls", base.solver)   # the bar as it is: accepted
+    # and the scene check says so before anything runs (pmpm run --check)
+    with pytest.raises(ConfigError) as e:
+        parse_scene({"grid": {"cell_size": 0.5, "cells": [4, 4]},
+                     "materials": {"m": {"type": "linear_elastic", "E": 1.0, "nu": 0.0, "density": 1.0}},
+                     "solver": {"scheme": "mls", "transfer": "apic", "end_time": 1.0}}, "s.toml")
+    assert e.value.key == "solver.transfer"
+
+
+def test_mls_keeps_its_affine_field_and_says_so():
+    """The scheme brings its transfer: the particles keep C (4 numbers), and the run header's
+    transfer line says MLS-MPM."""
+    s = build_solver(_bar("quadratic"), MPI.COMM_SELF)
+    assert s.particles["C"].shape == (s.particles.n, 4)
+    assert any("MLS-MPM" in line for line in s.transfer.describe())
