@@ -84,7 +84,8 @@ def profile_arguments(p):
     """The options of ``pmpm bench profile``."""
     p.add_argument("case", nargs="?", default=FRAME3_CASE,
                    help="scene file (default cases/frame_3storey.toml of this checkout)")
-    p.add_argument("--variant", default="elastic", help="its variant (default elastic)")
+    p.add_argument("--variant", default=None,
+                   help="its variant (default the scene's first: the frame's elastic)")
     p.add_argument("--steps", type=positive, default=None,
                    help="steps of each run of the scene (default: one frame interval of the scene)")
     p.add_argument("--rounds", type=positive, default=5, help="interleaved rounds (default 5)")

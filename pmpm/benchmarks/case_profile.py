@@ -142,20 +142,21 @@ def _default_steps(case, variant):
 def profile(args):
     """``pmpm bench profile``: returns the exit code."""
     case_file = os.path.abspath(args.case)
+    variant = load_scene(case_file, args.variant)[0].variant or None   # default: the first
     block = build_solver(block_scene(args.particles), MPI.COMM_SELF)
     for _ in range(30):   # compile (numba's cache), first touch
         block.step()
-    with staged_case(case_file, args.variant) as case:
-        steps, warm = _default_steps(case, args.variant) if args.steps is None else (args.steps, None)
+    with staged_case(case_file, variant) as case:
+        steps, warm = _default_steps(case, variant) if args.steps is None else (args.steps, None)
         if warm is None:
-            warm = build_solver(load_scene(case, args.variant)[0], MPI.COMM_SELF)
+            warm = build_solver(load_scene(case, variant)[0], MPI.COMM_SELF)
         for _ in range(5):
             warm.step()
         del warm
         rounds = []
         for _ in range(args.rounds):
             bcpu, bphases = _block_round(block, args.block_steps)
-            cpu, wall, phases, n, ran = _profiled_run(case, args.variant, steps)
+            cpu, wall, phases, n, ran = _profiled_run(case, variant, steps)
             rounds.append({"block_cpu": bcpu, "block_phases": bphases, "cpu": cpu, "wall": wall,
                            "phases": phases, "particles": n, "steps": ran})
     nb = block.particles.n
@@ -170,7 +171,7 @@ def profile(args):
     names = list(dict.fromkeys(k for r in rounds for k in list(r["phases"]) + list(r["block_phases"])))
     table = {k: {"case_ns": median_ns("phases", k, n, lambda r: r["steps"]),
                  "block_ns": median_ns("block_phases", k, nb, lambda r: args.block_steps)} for k in names}
-    print(f"pmpm bench profile: {os.path.relpath(case_file)} [{args.variant}] {n} particles, {ran} "
+    print(f"pmpm bench profile: {os.path.relpath(case_file)} [{variant or '-'}] {n} particles, {ran} "
           f"steps per run with its output, against the block of {nb} particles ({args.block_steps} "
           f"steps); {args.rounds} interleaved rounds, medians; {cpu_model()}")
     print(f"{'phase':24s} {'case ns/p-step':>15s} {'block ns/p-step':>16s}")
@@ -180,7 +181,7 @@ def profile(args):
     print(f"whole run (process CPU): case {med_case:.1f} ns/particle-step ({med_case * n * 1e-6:.2f} ms "
           f"per step), block {med_block:.1f}; ratio per round {', '.join(f'{r:.3f}' for r in ratios)}: "
           f"median {med_ratio:.3f}")
-    print(json.dumps({"case": os.path.relpath(case_file), "variant": args.variant, "particles": n,
+    print(json.dumps({"case": os.path.relpath(case_file), "variant": variant, "particles": n,
                       "steps": ran, "block_particles": nb, "block_steps": args.block_steps,
                       "rounds": args.rounds, "cpu": cpu_model(),
                       "case_ns_per_particle_step": med_case, "block_ns_per_particle_step": med_block,
