@@ -93,3 +93,6 @@ def profile_arguments(p):
                    help="particles of the reference block (default 200000)")
     p.add_argument("--block-steps", type=positive, default=20,
                    help="steps of the block per round (default 20)")
+    p.add_argument("--tiles", choices=["auto", "on", "off"], default="auto",
+                   help="the scene's grid node passes over active tiles (on), the whole window "
+                        "(off), or as the solver chooses (auto, default)")

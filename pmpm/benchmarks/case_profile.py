@@ -18,7 +18,8 @@ sorting, migration), each wrapped for the measurement only; the output's are the
 "loop: other" the rest of ``Run.execute`` (its schedules, the progress line, the start's health
 check). Times are wall seconds of the phases (perf_counter: the process CPU clock is a system
 call of 6-16 us on this machine, docs/performance.md); the ratio uses the process CPU time of
-the whole block run and of the whole ``Run.execute``. The run's set-up (reading the scene,
+the whole block run and of the whole ``Run.execute``. ``--tiles on|off`` forces the grid's node
+passes over the active tiles or the whole window (pmpm.core.grid; the same results to the bit). The run's set-up (reading the scene,
 building the solver, opening the file) is not timed: it is paid once per run, not per step.
 
 Prints a table and, last, one JSON line.
@@ -39,6 +40,7 @@ from pmpm.benchmarks.block import block_scene
 from pmpm.benchmarks.cpuinfo import cpu_model
 from pmpm.benchmarks.phase_profile import timed
 from pmpm.build import build_solver
+from pmpm.core.grid import TILE
 from pmpm.runner import Run
 from pmpm.scene.config import load_scene
 
@@ -48,6 +50,8 @@ __all__ = ["profile", "STEP_PHASES", "OUTPUT_PHASES", "staged_case"]
 STEP_PHASES = ("sort_particles", "reset_grid", "particles_to_grid", "exchange_halo", "update_grid",
                "grid_to_particles", "grid_velocity", "update_strain", "move_particles", "update_stress",
                "_check_and_next_dt", "check_energy", "migrate", "rebalance")
+#: ``--tiles``: the node passes' tile size forced (None: the solver's choice, choose_tile)
+TILES = {"auto": None, "on": TILE, "off": 0}
 #: the run's output phases timed
 OUTPUT_PHASES = ("record_history", "write_frame", "checkpoint", "snapshot")
 
@@ -93,12 +97,15 @@ def _timed_snapshots(totals):
         runner_module._Snapshot = original
 
 
-def _profiled_run(case, variant, steps):
-    """Run the scene ``steps`` steps with its output. Returns (CPU s, wall s of execute,
-    {phase: wall s}, particles, steps run)."""
+def _profiled_run(case, variant, steps, tiles=None):
+    """Run the scene ``steps`` steps with its output (``tiles``: the grid's node passes over
+    tiles of that many nodes, 0 the whole window; None as the solver chose). Returns (CPU s,
+    wall s of execute, {phase: wall s}, particles, steps run)."""
     scene = load_scene(case, variant, overrides={"solver.max_steps": steps})[0]
     run = Run(scene, MPI.COMM_SELF)
     s = run.solver
+    if tiles is not None:
+        s.window.use_tiles(tiles)
     totals = collections.defaultdict(float)
     with contextlib.ExitStack() as stack:
         stack.enter_context(timed(s, "step", totals))
@@ -156,7 +163,7 @@ def profile(args):
         rounds = []
         for _ in range(args.rounds):
             bcpu, bphases = _block_round(block, args.block_steps)
-            cpu, wall, phases, n, ran = _profiled_run(case, variant, steps)
+            cpu, wall, phases, n, ran = _profiled_run(case, variant, steps, TILES[args.tiles])
             rounds.append({"block_cpu": bcpu, "block_phases": bphases, "cpu": cpu, "wall": wall,
                            "phases": phases, "particles": n, "steps": ran})
     nb = block.particles.n
@@ -174,16 +181,21 @@ def profile(args):
     print(f"pmpm bench profile: {os.path.relpath(case_file)} [{variant or '-'}] {n} particles, {ran} "
           f"steps per run with its output, against the block of {nb} particles ({args.block_steps} "
           f"steps); {args.rounds} interleaved rounds, medians; {cpu_model()}")
-    print(f"{'phase':24s} {'case ns/p-step':>15s} {'block ns/p-step':>16s}")
+    # the phases in wall time (a shared machine inflates them all, the shares less so)
+    case_wall = sum(r["case_ns"] for r in table.values())
+    block_wall = sum(r["block_ns"] for r in table.values())
+    print(f"{'phase (wall)':24s} {'case ns/p-step':>15s} {'share':>6s} {'block ns/p-step':>16s} {'share':>6s}")
     for k, row in sorted(table.items(), key=lambda kv: -kv[1]["case_ns"]):
-        print(f"{k:24s} {row['case_ns']:15.2f} {row['block_ns']:16.2f}")
+        row["case_share"], row["block_share"] = row["case_ns"] / case_wall, row["block_ns"] / block_wall
+        print(f"{k:24s} {row['case_ns']:15.2f} {100 * row['case_share']:5.1f}% {row['block_ns']:16.2f} "
+              f"{100 * row['block_share']:5.1f}%")
     med_case, med_block, med_ratio = (statistics.median(v) for v in (per_case, per_block, ratios))
     print(f"whole run (process CPU): case {med_case:.1f} ns/particle-step ({med_case * n * 1e-6:.2f} ms "
           f"per step), block {med_block:.1f}; ratio per round {', '.join(f'{r:.3f}' for r in ratios)}: "
           f"median {med_ratio:.3f}")
     print(json.dumps({"case": os.path.relpath(case_file), "variant": variant, "particles": n,
                       "steps": ran, "block_particles": nb, "block_steps": args.block_steps,
-                      "rounds": args.rounds, "cpu": cpu_model(),
+                      "rounds": args.rounds, "cpu": cpu_model(), "tiles": args.tiles,
                       "case_ns_per_particle_step": med_case, "block_ns_per_particle_step": med_block,
                       "ratio": med_ratio, "ratio_per_round": ratios, "phases_ns": table}))
     return 0
