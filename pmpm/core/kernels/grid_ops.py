@@ -166,14 +166,8 @@ def mark_tiles(x, origin, inv_h, ox, oy, nx, ny, reach, shift, active):
     """Set ``active`` for every tile (2**shift nodes a side) holding a node of some particle's
     stencil: with c the particle's cell along an axis (window-local), nodes c - reach + 1 ..
     c + reach (the B-splines' and GIMP's supports, ``reach`` = pmpm.core.shape.ghost_width),
-    clipped to the window's ``nx`` x ``ny`` nodes. ``active`` is not cleared first.
-
-    Where a stencil (2 reach nodes) is no wider than a tile, it meets at most two tiles per
-    axis, those of its first and its last node: the four (or fewer) tiles of those corners are
-    stored without a test, which costs less than telling a particle in its predecessor's cell
-    (a branch the sorted particles mispredict every few rows). Else every tile of the stencil,
-    skipping a particle in the same cell as the one before it."""
-    corners = 2 * reach <= (1 << shift)
+    clipped to the window's ``nx`` x ``ny`` nodes. ``active`` is not cleared first. A particle
+    in the same cell as the one before it (particles are sorted by cell) adds nothing."""
     last_x = last_y = -(1 << 62)
     for p in range(x.shape[0]):
         sx = (x[p, 0] - origin[0]) * inv_h
@@ -183,22 +177,12 @@ def mark_tiles(x, origin, inv_h, ox, oy, nx, ny, reach, shift, active):
             return
         cx = int(math.floor(sx)) - ox
         cy = int(math.floor(sy)) - oy
-        # shifts, not divisions: an integer division costs more than the rest of the loop
-        i0, i1 = max(cx - reach + 1, 0), min(cx + reach, nx - 1)
-        j0, j1 = max(cy - reach + 1, 0), min(cy + reach, ny - 1)
-        if corners:
-            if i0 <= i1 and j0 <= j1:   # (a stencil wholly outside the window marks nothing)
-                a, b, c, d = i0 >> shift, i1 >> shift, j0 >> shift, j1 >> shift
-                active[a, c] = True
-                active[a, d] = True
-                active[b, c] = True
-                active[b, d] = True
-            continue
         if cx == last_x and cy == last_y:
             continue
         last_x, last_y = cx, cy
-        for ti in range(i0 >> shift, (i1 >> shift) + 1):
-            for tj in range(j0 >> shift, (j1 >> shift) + 1):
+        # shifts, not divisions: an integer division costs more than the rest of the loop
+        for ti in range(max(cx - reach + 1, 0) >> shift, (min(cx + reach, nx - 1) >> shift) + 1):
+            for tj in range(max(cy - reach + 1, 0) >> shift, (min(cy + reach, ny - 1) >> shift) + 1):
                 active[ti, tj] = True
 
 
