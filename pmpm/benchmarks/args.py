@@ -91,8 +91,11 @@ def profile_arguments(p):
     p.add_argument("--rounds", type=positive, default=5, help="interleaved rounds (default 5)")
     p.add_argument("--particles", type=positive, default=200_000,
                    help="particles of the reference block (default 200000)")
-    p.add_argument("--block-steps", type=positive, default=20,
-                   help="steps of the block per round (default 20)")
+    p.add_argument("--block-steps", type=positive, default=40,
+                   help="steps of the block per round (default 40)")
+    p.add_argument("--block-chunks", type=positive, default=10,
+                   help="chunks the block's steps are cut into, run between the scene's steps "
+                        "(default 10)")
     p.add_argument("--tiles", choices=["auto", "on", "off"], default="auto",
                    help="the scene's grid node passes over active tiles (on), the whole window "
                         "(off), or as the solver chooses (auto, default)")

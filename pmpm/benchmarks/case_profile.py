@@ -1,14 +1,15 @@
 """``pmpm bench profile [case]``: where a scene's step goes, phase by phase, with its output, against
 the benchmark block's cost per particle-step.
 
-Each round runs, in turn, (1) the 200,000-particle benchmark block (cubic MUSL, elastic,
-pmpm.benchmarks.block) for ``--block-steps`` steps and (2) the scene as ``pmpm run`` runs it
-(``pmpm.runner.Run``: frames, history rows, tracked points, section cuts, reactions, energies,
-the last good state, checkpoints) for ``--steps`` steps into a temporary folder, by default one
-frame interval of the scene (so each run writes one frame and its history rows, the output a
-step of the whole run pays on average). Both in the same process, round robin, so a drift of a
-shared machine hits both alike; the ratio of the two costs per particle-step is taken per round
-and its median printed (the absolute times of a shared machine mean less than the ratio).
+Each round runs the scene as ``pmpm run`` runs it (``pmpm.runner.Run``: frames, history rows,
+tracked points, section cuts, reactions, energies, the last good state, checkpoints) for
+``--steps`` steps into a temporary folder, by default one frame interval of the scene (so each
+run writes one frame and its history rows, the output a step of the whole run pays on
+average), and between its steps, in ``--block-chunks`` chunks spread over the run, the
+200,000-particle benchmark block (cubic MUSL, elastic, pmpm.benchmarks.block) for
+``--block-steps`` steps, timed apart: a drift of a shared machine hits both alike (the
+absolute times of a shared machine mean less than the ratio). The ratio of the two costs per
+particle-step is taken per round and its median printed.
 
 The step's phases are the solver's own methods (reset_grid, particles_to_grid, exchange_halo,
 update_grid, grid_to_particles, grid_velocity, update_strain, update_stress, the step-end check,
@@ -97,46 +98,84 @@ def _timed_snapshots(totals):
         runner_module._Snapshot = original
 
 
-def _profiled_run(case, variant, steps, tiles=None):
-    """Run the scene ``steps`` steps with its output (``tiles``: the grid's node passes over
-    tiles of that many nodes, 0 the whole window; None as the solver chose). Returns (CPU s,
-    wall s of execute, {phase: wall s}, particles, steps run)."""
+class _Block:
+    """The reference block run in chunks between the scene's steps (``chunk(k)`` runs ``k``
+    steps): its process CPU and wall seconds and its phases' wall seconds add up over a round."""
+
+    def __init__(self, solver):
+        self.solver = solver
+        self.cpu = self.wall = 0.0
+        self.steps = 0
+        self.totals = collections.defaultdict(float)
+
+    @contextlib.contextmanager
+    def timed(self):
+        with contextlib.ExitStack() as stack:
+            for name in STEP_PHASES:
+                stack.enter_context(timed(self.solver, name, self.totals))
+            stack.enter_context(timed(self.solver, "step", self.totals))
+            yield self
+
+    def chunk(self, k):
+        c0, t0 = time.process_time(), time.perf_counter()
+        for _ in range(k):
+            self.solver.step()
+        self.cpu += time.process_time() - c0
+        self.wall += time.perf_counter() - t0
+        self.steps += k
+
+    def phases(self):
+        phases = {k: self.totals[k] for k in STEP_PHASES if self.totals[k] > 0}
+        phases["step: other"] = max(self.totals["step"] - sum(phases.values()), 0.0)
+        return phases
+
+
+def _profiled_run(case, variant, steps, block, block_steps, chunks, tiles=None):
+    """Run the scene ``steps`` steps with its output, the ``block`` (a :class:`_Block`) run
+    ``block_steps`` steps in ``chunks`` chunks spread evenly between the scene's steps (not
+    counted in the scene's times), so that a drift of a shared machine hits both alike.
+    ``tiles``: the scene's grid node passes over tiles of that many nodes, 0 the whole window,
+    None as the solver chose. Returns (CPU s, wall s of execute, {phase: wall s}, particles,
+    steps run), the block's share taken out."""
     scene = load_scene(case, variant, overrides={"solver.max_steps": steps})[0]
     run = Run(scene, MPI.COMM_SELF)
     s = run.solver
     if tiles is not None:
         s.window.use_tiles(tiles)
     totals = collections.defaultdict(float)
+    every = max(1, steps // chunks)
+    per_chunk = [block_steps // chunks + (1 if k < block_steps % chunks else 0) for k in range(chunks)]
     with contextlib.ExitStack() as stack:
+        stack.enter_context(block.timed())
         stack.enter_context(timed(s, "step", totals))
         for name in STEP_PHASES:
             stack.enter_context(timed(s, name, totals))
         for name in OUTPUT_PHASES[:3]:
             stack.enter_context(timed(run, name, totals))
         stack.enter_context(_timed_snapshots(totals))
+        timed_step = s.step
+
+        def step():   # the block's chunk before every ``every``-th step of the scene
+            if s.step_count % every == every // 2 and per_chunk:
+                block.chunk(per_chunk.pop())
+            return timed_step()
+
+        s.step = step
         c0, t0 = time.process_time(), time.perf_counter()
-        run.execute()
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        b_cpu, b_wall = block.cpu, block.wall
+        try:
+            run.execute()
+        finally:
+            del s.step   # the timed wrapper's own exit restores the method
+            s.step = timed_step
+        while per_chunk:   # a run shorter than planned: the rest of the block's steps after it
+            block.chunk(per_chunk.pop())
+        wall = time.perf_counter() - t0 - (block.wall - b_wall)
+        cpu = time.process_time() - c0 - (block.cpu - b_cpu)
     phases = {k: totals[k] for k in STEP_PHASES + OUTPUT_PHASES if totals[k] > 0}
     phases["step: other"] = max(totals["step"] - sum(totals[k] for k in STEP_PHASES), 0.0)
     phases["loop: other"] = max(wall - totals["step"] - sum(totals[k] for k in OUTPUT_PHASES), 0.0)
     return cpu, wall, phases, s.particles.n, s.step_count
-
-
-def _block_round(solver, steps):
-    """(CPU s, {phase: wall s}) of ``steps`` steps of the block."""
-    totals = collections.defaultdict(float)
-    with contextlib.ExitStack() as stack:
-        for name in STEP_PHASES:
-            stack.enter_context(timed(solver, name, totals))
-        stack.enter_context(timed(solver, "step", totals))
-        c0 = time.process_time()
-        for _ in range(steps):
-            solver.step()
-        cpu = time.process_time() - c0
-    phases = {k: totals[k] for k in STEP_PHASES if totals[k] > 0}
-    phases["step: other"] = max(totals["step"] - sum(phases.values()), 0.0)
-    return cpu, phases
 
 
 def _default_steps(case, variant):
@@ -162,9 +201,10 @@ def profile(args):
         del warm
         rounds = []
         for _ in range(args.rounds):
-            bcpu, bphases = _block_round(block, args.block_steps)
-            cpu, wall, phases, n, ran = _profiled_run(case, variant, steps, TILES[args.tiles])
-            rounds.append({"block_cpu": bcpu, "block_phases": bphases, "cpu": cpu, "wall": wall,
+            b = _Block(block)
+            cpu, wall, phases, n, ran = _profiled_run(case, variant, steps, b, args.block_steps,
+                                                      args.block_chunks, TILES[args.tiles])
+            rounds.append({"block_cpu": b.cpu, "block_phases": b.phases(), "cpu": cpu, "wall": wall,
                            "phases": phases, "particles": n, "steps": ran})
     nb = block.particles.n
     n, ran = rounds[0]["particles"], rounds[0]["steps"]

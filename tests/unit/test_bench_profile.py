@@ -47,7 +47,7 @@ def test_profile_prints_phases_of_the_step_and_the_output(tmp_path, monkeypatch)
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         code = main(["bench", "profile", str(scene), "--rounds", "2",
-                     "--particles", "2000", "--block-steps", "2"])
+                     "--particles", "2000", "--block-steps", "4", "--block-chunks", "3"])
     assert code == 0
     out = json.loads(buf.getvalue().strip().splitlines()[-1])
     phases = out["phases_ns"]
