@@ -19,7 +19,7 @@ __all__ = ["phase_times", "timed_kernels", "timed", "PHASE_KERNELS"]
 
 #: the kernels the solver calls each step (the others run at set-up or output only)
 PHASE_KERNELS = ("p2g", "g2p_velocity", "g2p_kinematics", "stress_power", "count_strays",
-                 "grid_update", "momentum_to_velocity", "jaumann_rotate", "rotate", "cell_order", "cells_in_order",
+                 "grid_update", "momentum_to_velocity", "jaumann_rotate", "rotate", "cell_order",
                  "scatter_point_loads", "point_load_work", "check_deformation", "in_plane_trace",
                  "advance_thickness_stretch")
 

@@ -441,9 +441,6 @@ class Solver:
     def sort_particles(self):
         """Order particles by cell so that neighbours in memory share grid nodes."""
         w, g = self.window, self.grid
-        if K.cells_in_order(self.particles["x"], g.origin, g.inv_h, w.ox, w.ox + w.shape[0],
-                            w.oy, w.oy + w.shape[1]):
-            return   # nobody changed cell since the last sort: one pass instead of the sort's four
         order = K.cell_order(self.particles["x"], g.origin, g.inv_h, w.ox, w.ox + w.shape[0],
                              w.oy, w.oy + w.shape[1])
         self.particles.reorder(order)

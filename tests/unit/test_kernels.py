@@ -179,28 +179,6 @@ def test_cell_order_sorts_by_cell_and_is_a_permutation():
     assert np.all(np.diff(key) >= 0)
 
 
-def test_cells_in_order_is_true_exactly_when_the_sort_is_the_identity():
-    """``cells_in_order`` (the sort's shortcut) against the sort itself: True exactly when
-    ``cell_order`` returns the identity, for particles sorted, sorted then one moved a cell
-    (forwards and backwards), and with particles outside the window (sorted last)."""
-    p = _particles(500)
-    x = p["x"][K.cell_order(p["x"], ORIGIN, 1 / H, 0, CELLS[0], 0, CELLS[1])].copy()
-    window = (0, CELLS[0], 0, CELLS[1])
-    cases = [x, p["x"]]
-    for row, shift in ((0, H), (250, -H), (499, -H), (100, (0.0, H))):
-        moved = x.copy()
-        moved[row] += shift
-        cases.append(moved)
-    outside = np.concatenate([x, x[:3] + 100.0])
-    cases += [outside, outside[::-1].copy()]
-    for lo_hi in (window, (2, CELLS[0] - 1, 1, CELLS[1])):   # a window cutting the particles
-        for c in cases:
-            identity = K.is_identity(K.cell_order(c, ORIGIN, 1 / H, *lo_hi))
-            assert K.cells_in_order(c, ORIGIN, 1 / H, *lo_hi) == identity
-    assert K.cells_in_order(x, ORIGIN, 1 / H, *window)   # both answers occur
-    assert not K.cells_in_order(p["x"], ORIGIN, 1 / H, *window)
-
-
 def test_reorder_in_place_equals_fancy_indexing():
     from pmpm.core.particles import Particles
     rng = np.random.default_rng(3)

@@ -2,7 +2,7 @@
 import numba as nb
 import numpy as np
 
-__all__ = ["cell_order", "cells_in_order", "permute_rows", "is_identity"]
+__all__ = ["cell_order", "permute_rows", "is_identity"]
 
 
 @nb.njit(cache=True)
@@ -33,28 +33,6 @@ def cell_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
         order[start[k]] = p
         start[k] += 1
     return order
-
-
-@nb.njit(cache=True)
-def cells_in_order(x, origin, inv_h, i_lo, i_hi, j_lo, j_hi):
-    """True when the particles are in the order ``cell_order`` gives (its keys never decrease
-    along the array: the stable counting sort is then the identity). One pass over the positions,
-    stopping at the first particle out of order: what a sort costs in a solid, where between two
-    sorts hardly a particle changes cell (the three-storey frame: none, at 1e-5 m per step)."""
-    n = x.shape[0]
-    ny = j_hi - j_lo
-    ncell = (i_hi - i_lo) * ny
-    last = -1
-    for p in range(n):
-        i = int(np.floor((x[p, 0] - origin[0]) * inv_h)) - i_lo
-        j = int(np.floor((x[p, 1] - origin[1]) * inv_h)) - j_lo
-        k = ncell
-        if 0 <= i < i_hi - i_lo and 0 <= j < ny:
-            k = i * ny + j
-        if k < last:
-            return False
-        last = k
-    return True
 
 
 @nb.njit(cache=True)
