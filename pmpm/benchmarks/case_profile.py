@@ -31,6 +31,7 @@ import json
 import os
 import shutil
 import statistics
+import sys
 import tempfile
 import time
 
@@ -42,6 +43,7 @@ from pmpm.benchmarks.cpuinfo import cpu_model
 from pmpm.benchmarks.phase_profile import timed
 from pmpm.build import build_solver
 from pmpm.core.grid import TILE
+from pmpm.errors import ConfigError
 from pmpm.runner import Run
 from pmpm.scene.config import load_scene
 
@@ -188,7 +190,11 @@ def _default_steps(case, variant):
 def profile(args):
     """``pmpm bench profile``: returns the exit code."""
     case_file = os.path.abspath(args.case)
-    variant = load_scene(case_file, args.variant)[0].variant or None   # default: the first
+    try:   # a bad scene or variant: one line, nothing run
+        variant = load_scene(case_file, args.variant)[0].variant or None   # default: the first
+    except ConfigError as exc:
+        print(f"pmpm: error: bench profile: {exc}", file=sys.stderr)
+        return 2
     block = build_solver(block_scene(args.particles), MPI.COMM_SELF)
     for _ in range(30):   # compile (numba's cache), first touch
         block.step()

@@ -61,3 +61,12 @@ def test_profile_prints_phases_of_the_step_and_the_output(tmp_path, monkeypatch)
     assert sum(v["case_ns"] for v in phases.values()) > 0
     # it wrote nothing where it ran: its output went into a temporary folder, removed
     assert sorted(os.listdir(tmp_path)) == ["small.toml"]
+
+
+def test_profile_refuses_a_bad_scene_or_variant_in_one_line(tmp_path, capsys):
+    scene = tmp_path / "small.toml"
+    scene.write_text(SCENE)
+    assert main(["bench", "profile", str(tmp_path / "missing.toml")]) == 2
+    assert main(["bench", "profile", str(scene), "--variant", "nosuch"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("pmpm: error: bench profile: ") for line in err)
