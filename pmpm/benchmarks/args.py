@@ -3,7 +3,8 @@ import argparse
 import math
 import os
 
-__all__ = ["MAX_COUNT", "MATERIALS", "FRAME_CASE", "VARIANT", "positive", "finite_positive", "ranks_arguments"]
+__all__ = ["MAX_COUNT", "MATERIALS", "FRAME_CASE", "VARIANT", "positive", "finite_positive", "ranks_arguments",
+           "FRAME3_CASE", "profile_arguments"]
 
 
 #: largest count a benchmark option takes (particles, steps, repeats): 10^9 particles already
@@ -52,6 +53,8 @@ MATERIALS = {
 FRAME_CASE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                           "cases", "portal_frame.toml")
 VARIANT = "elastic"
+#: the three-storey frame, the scene ``pmpm bench profile`` times by default
+FRAME3_CASE = os.path.join(os.path.dirname(FRAME_CASE), "frame_3storey.toml")
 
 
 def ranks_arguments(p):
@@ -75,3 +78,24 @@ def ranks_arguments(p):
     p.add_argument("--variant", default=VARIANT, help=f"its variant (default {VARIANT})")
     p.add_argument("--count-calls", action="store_true",
                    help="also count the MPI calls per step (a PMPI shim built with mpicc)")
+
+
+def profile_arguments(p):
+    """The options of ``pmpm bench profile``."""
+    p.add_argument("case", nargs="?", default=FRAME3_CASE,
+                   help="scene file (default cases/frame_3storey.toml of this checkout)")
+    p.add_argument("--variant", default=None,
+                   help="its variant (default the scene's first: the frame's elastic)")
+    p.add_argument("--steps", type=positive, default=None,
+                   help="steps of each run of the scene (default: one frame interval of the scene)")
+    p.add_argument("--rounds", type=positive, default=5, help="interleaved rounds (default 5)")
+    p.add_argument("--particles", type=positive, default=200_000,
+                   help="particles of the reference block (default 200000)")
+    p.add_argument("--block-steps", type=positive, default=40,
+                   help="steps of the block per round (default 40)")
+    p.add_argument("--block-chunks", type=positive, default=10,
+                   help="chunks the block's steps are cut into, run between the scene's steps "
+                        "(default 10)")
+    p.add_argument("--tiles", choices=["auto", "on", "off"], default="auto",
+                   help="the scene's grid node passes over active tiles (on), the whole window "
+                        "(off), or as the solver chooses (auto, default)")

@@ -1,6 +1,6 @@
 """``pmpm bench ...``: the benchmark sub-commands and their dispatch.
 
-``throughput``, ``effects``, ``scaling``, ``fixedcost``, ``ranks`` and ``implicit`` are the package's own.
+``throughput``, ``effects``, ``scaling``, ``fixedcost``, ``profile``, ``ranks`` and ``implicit`` are the package's own.
 ``accuracy`` and ``peer`` run drivers that live in the repository, not in the installed package
 (``studies/accuracy.py``: sweeps against closed forms and an FE model; ``bench/peer.py``: Taichi
 peers): from a checkout, with the checkout importable (its root the working directory of
@@ -9,7 +9,7 @@ peers): from a checkout, with the checkout importable (its root the working dire
 import argparse
 import importlib
 
-from pmpm.benchmarks.args import MATERIALS, ranks_arguments
+from pmpm.benchmarks.args import MATERIALS, profile_arguments, ranks_arguments
 from pmpm.benchmarks.args import finite_positive as _finite_positive
 from pmpm.benchmarks.args import positive as _positive
 
@@ -66,6 +66,8 @@ def add_bench_parser(sub):
                     help="with --output: runs of this many steps and twice as many (default 1500)")
     fc.add_argument("--whole-window", action="store_true",
                     help="also time every case with the grid tiles off (each node pass over the whole window)")
+    profile_arguments(bs.add_parser("profile", help="a scene's step phase by phase with its output, "
+                                    "against the 200k block (default cases/frame_3storey.toml)"))
     ranks_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
     # the implicit integrator's portal (docs/implicit.md): its own options, parsed by its main
     p = bs.add_parser("implicit", help="the portal frame with the implicit and the explicit integrator",
@@ -102,7 +104,7 @@ def _repository_driver(name, argv):
 def main(args):
     """Dispatch ``pmpm bench <name>`` (the drivers imported here: ``pmpm --help`` needs only
     the options, no kernel module)."""
-    from pmpm.benchmarks import ranks
+    from pmpm.benchmarks import case_profile, ranks
     from pmpm.benchmarks.fixed_cost import fixed_cost
     from pmpm.benchmarks.scaling import scaling
     from pmpm.benchmarks.throughput import effects, throughput
@@ -117,6 +119,8 @@ def main(args):
         return fixed_cost(args)
     if args.bench == "ranks":
         return ranks.ranks(args)
+    if args.bench == "profile":
+        return case_profile.profile(args)
     if args.bench == "effects":
         return effects(args)
     return scaling(args)

@@ -16,7 +16,7 @@ from pmpm.core import kernels as K
 import pmpm.core.mls as mls_module
 import pmpm.core.solver as solver_module
 
-__all__ = ["phase_times", "PHASE_KERNELS"]
+__all__ = ["phase_times", "timed_kernels", "timed", "PHASE_KERNELS"]
 
 #: the kernels the solver calls each step (the others run at set-up or output only)
 PHASE_KERNELS = ("p2g", "g2p_velocity", "g2p_kinematics", "stress_power", "count_strays",
@@ -47,10 +47,11 @@ def _timed(obj, name, totals):
             delattr(obj, name)
 
 
-def phase_times(solver, steps):
-    """Run ``steps`` steps with every kernel call timed. Returns (total seconds, {phase:
-    seconds}); the phase "other" is the rest (Python, exchanges, checks)."""
-    totals = collections.defaultdict(float)
+@contextlib.contextmanager
+def timed_kernels(solver, totals):
+    """Within the context, every kernel call of ``solver``'s step (and its materials' stress
+    updates, the halo rounds, the step-end wait, the migration) adds its wall seconds to
+    ``totals[name]`` (a defaultdict(float)); restored on the way out."""
     with contextlib.ExitStack() as stack:
         for name in PHASE_KERNELS:
             stack.enter_context(_timed(K, name, totals))
@@ -61,6 +62,20 @@ def phase_times(solver, steps):
         stack.enter_context(_timed(solver_module, "wait_all", totals))   # the step-end reduction
         for name in ("sum_halo", "migrate"):
             stack.enter_context(_timed(solver.decomp, name, totals))
+        yield totals
+
+
+def timed(obj, name, totals):
+    """Context: calls of ``obj.name`` add their wall seconds to ``totals[name]`` (a module's
+    function or an instance's method, restored on the way out)."""
+    return _timed(obj, name, totals)
+
+
+def phase_times(solver, steps):
+    """Run ``steps`` steps with every kernel call timed. Returns (total seconds, {phase:
+    seconds}); the phase "other" is the rest (Python, exchanges, checks)."""
+    totals = collections.defaultdict(float)
+    with timed_kernels(solver, totals):
         t0 = time.perf_counter()
         for _ in range(steps):
             solver.step()

@@ -33,6 +33,7 @@ from pmpm.core import kernels as K
 from pmpm.core.effects import EffectList, energy_terms
 from pmpm.core.fields import GridFields
 from pmpm.core.grid import GridWindow, choose_tile
+from pmpm.core.material_groups import same_elastic_energy, single_law
 from pmpm.core.shape import CPDI_REACH, MAX_HALF_LENGTH, ghost_width, shape_argument
 from pmpm.core.step import SchemeContext
 from pmpm.core.transfers import StepContext
@@ -124,6 +125,11 @@ class Solver:
         self.comm = decomp.comm
         self.axis = decomp.axis
         self.materials = materials
+        # materials of one law (copies of a steel that differ in density only) are updated, and
+        # their energy summed, in one pass over the particles instead of one per material
+        self._stress_passes = ([(materials[0], -1)] if single_law(materials) else
+                               [(m, k if len(materials) > 1 else -1) for k, m in enumerate(materials)])
+        self._one_energy_sum = same_elastic_energy(materials)
         self.scheme, self.transfer = scheme, transfer
         self.options = options
         self.interpolation = options.interpolation
@@ -350,22 +356,22 @@ class Solver:
         # internal work by the trapezoid rule, half before and half after the update; it closes
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
-        several = len(self.materials) > 1
         thickness = self.keeps_F and self.options.plane_stress
-        for k, material in enumerate(self.materials):
+        # the tensor state fields (back stress) are shared by the materials: rotated once
+        for name in dict.fromkeys(n for m in self.materials for n in m.tensor_state_fields):
+            self._rotate(p[name])
+        for material, which in self._stress_passes:
             if thickness and not material.needs_deformation_gradient:
                 trace_before = self._scratch("_trace_buf", (p.n,))
                 K.in_plane_trace(p["stress"], trace_before)
             state = {name: p.fields.get(name) for name in material.state_fields}
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
-            for name in material.tensor_state_fields:
-                self._rotate(p[name])
-            material.update_stress(p["stress"], self._de, state, p["mat"], k if several else -1)
+            material.update_stress(p["stress"], self._de, state, p["mat"], which)
             if thickness and not material.needs_deformation_gradient:
                 # F33 from szz = 0 (the hyperelastic models solve it themselves)
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
-                                            material.E, material.nu, p["mat"], k if several else -1)
+                                            material.E, material.nu, p["mat"], which)
         self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
         for after in self._hooks["after_stress_update"]:   # viscous stress, fading bodies
             after(self)
@@ -591,6 +597,9 @@ class Solver:
     def _strain_energy(self, p):
         """The stored energy of particles ``p``: hyperelastic models know W(F); the others' is
         the recoverable 1/2 sigma : C^-1 : sigma."""
+        if self._one_energy_sum:   # one E and nu: one sum over every particle
+            m = self.materials[0]
+            return K.elastic_energy(p["stress"], p["vol"], m.E, m.nu, p["mat"], -1)
         several = len(self.materials) > 1
         return sum(m.strain_energy(p["F"], p["vol0"], p["mat"], k if several else -1)
                    if m.needs_deformation_gradient else
