@@ -127,6 +127,7 @@ def describe_effects(scene, s):
     if s.keeps_F:
         out.append("deformation gradient F per particle")
     out += s.effects.describe()       # the effects the scene names (pmpm.core.effects)
+    out += s.scheme.describe()
     out += s.transfer.describe()
     out += s.grid_fields.describe()   # contact
     return list(dict.fromkeys(out))   # once each (several materials share a model)

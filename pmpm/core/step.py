@@ -154,8 +154,8 @@ class Scheme:
         return transfer
 
     def describe(self):
-        """Lines for the run header's ``effect on:`` list (none for the schemes so far; the header,
-        pmpm.runner, does not read them yet)."""
+        """Lines for the run header's and ``pmpm --check``'s ``effect on:`` list
+        (pmpm.runner.describe_effects); none for the paper's schemes."""
         return []
 
     def advance(self, ctx):
