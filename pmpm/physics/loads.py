@@ -86,7 +86,7 @@ class Loads(Effect):
         """Effect lines for the start-up log."""
         out = []
         if self.gravity is not None:
-            out.append(f"gravity {tuple(self.gravity)}")
+            out.append(f"gravity ({self.gravity[0]:g}, {self.gravity[1]:g}) m/s^2")
         for f in self.forces:
             out.append(f"force {f.name!r}: {f.force} N, {f.time_function['type']}")
         return out
