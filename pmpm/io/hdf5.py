@@ -215,10 +215,11 @@ def _all_early(path):
 
 def _same_where_present(old, new):
     """True if ``new`` equals ``old`` in every row where both hold a particle (not the fill)."""
-    if old.shape != new.shape:
-        return old.size == 0 or new.size == 0  # a rank outside the file (gather mode)
+    if old.size == 0 or new.size == 0:
+        return True  # nothing to compare: no rows here (a rank outside the file in gather mode)
     fill = fill_value(new.dtype)
-    flat_old, flat_new = old.reshape(len(old), -1), new.reshape(len(new), -1)
+    width = int(np.prod(new.shape[1:], dtype=np.int64))
+    flat_old, flat_new = old.reshape(len(old), width), new.reshape(len(new), width)
     if new.dtype.kind == "f":
         present = np.all(np.isfinite(flat_old), axis=1) & np.all(np.isfinite(flat_new), axis=1)
     else:

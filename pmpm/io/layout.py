@@ -50,7 +50,7 @@ def fill_of(dtype):
 
 def _exists(rows):
     """Which rows of one frame of one field hold a particle (not the fill value)."""
-    flat = rows.reshape(len(rows), -1)
+    flat = rows.reshape(len(rows), int(np.prod(rows.shape[1:], dtype=np.int64)))
     if rows.dtype.kind in "fc":
         return np.all(np.isfinite(flat), axis=1)
     return np.all(flat != fill_of(rows.dtype), axis=1)
