@@ -126,8 +126,9 @@ def frame_fields(f):
         Name -> field of shape ``(F, n_total, *trailing)``, per-frame fields first.
     """
     frames = f["frames"]
-    count = frames["time"].shape[0]
     per_frame = {n: d for n, d in frames.items() if n not in ("time", "step") and d.ndim >= 2}
+    count = frames["time"].shape[0] if "time" in frames else \
+        next(iter(per_frame.values())).shape[0] if per_frame else 0
     # the field whose rows say which particles exist: positions when written, else any
     witness = per_frame["x"] if "x" in per_frame else next(
         (d for n, d in per_frame.items() if n != "id"), None)
