@@ -92,6 +92,7 @@ from pmpm.io.validate import check_results_schema
 
 __all__ = [
     "OutputFile",
+    "LayoutError",
     "COMPONENT_NAMES",
     "read_attrs",
     "read_frame",
@@ -211,6 +212,12 @@ def _all_early(path):
     with h5py.File(path, "r") as f:
         f.visititems(visit)
     return not late
+
+
+class LayoutError(ValueError):
+    """A results file a restart cannot append to (its reason is the one line the user reads)."""
+
+    user_reason = True
 
 
 def _same_where_present(old, new):
@@ -607,7 +614,7 @@ class OutputFile:
         layout = layout_of(f)
         if layout != LAYOUT:
             # an older layout is read (pmpm.io.layout) but never extended: one file, one layout
-            raise ValueError(f"written by an older pmpm (layout {layout!r}); a restart "
+            raise LayoutError(f"written by an older pmpm (layout {layout!r}); a restart "
                              f"appends only to {LAYOUT!r} files: run the scene afresh")
         if int(f.attrs.get("n_total", -1)) != self.n_total:
             problems.append(f"n_total {f.attrs.get('n_total')} != {self.n_total}")
