@@ -20,6 +20,10 @@ Run (every rank runs the scene; rank 0 measures)::
     mpirun -n 2 python -m studies.output_size --cell 0.05
     python -m studies.output_size --cell 0.1            # a minute on one rank
 
+Then the cost of writing a frame (rank 0 alone, ``OutputFile`` on one rank): the elastoplastic
+double run's frames written again through the writer at each precision, with the compression
+on and off (``pmpm.io.hdf5.COMPRESSION`` emptied), median wall time per frame.
+
 The last line is one JSON object with every figure.
 """
 import argparse
@@ -27,6 +31,7 @@ import json
 import os
 import shutil
 import tempfile
+import time
 
 import h5py
 import numpy as np
@@ -34,6 +39,8 @@ from mpi4py import MPI
 
 import pmpm
 from pmpm.build import build_solver
+from pmpm.io import hdf5
+from pmpm.io.layout import frame_fields
 from pmpm.io.legacy import write_layout2
 from pmpm.scene.config import load_scene
 
@@ -75,6 +82,35 @@ def measure(path, scratch):
     return out
 
 
+def write_cost(path, scratch, precision, compress):
+    """Median wall time (s) of OutputFile.write_frame replaying the frames of ``path``."""
+    with h5py.File(path, "r") as f:
+        fields = {n: d.read() for n, d in frame_fields(f).items()}
+        times = f["frames/time"][()]
+    n = fields["x"].shape[1]
+    specs = {k: (v.shape[2:], np.float64 if v.dtype.kind == "f" else v.dtype) for k, v in fields.items()}
+    saved = dict(hdf5.COMPRESSION)
+    if not compress:
+        hdf5.COMPRESSION.clear()
+    target = os.path.join(scratch, f"cost_{precision}_{compress}.h5")
+    walls = []
+    try:
+        with hdf5.OutputFile(target, MPI.COMM_SELF, {"scene": "{}"}, n, specs, [], [], ["time"],
+                             precision=precision) as out:
+            for k, t in enumerate(times):
+                rows = {name: a[k].astype(specs[name][1]) for name, a in fields.items()}
+                alive = rows["id"] >= 0
+                rows = {name: a[alive] for name, a in rows.items()}
+                start = time.perf_counter()
+                out.write_frame(float(t), k, rows)
+                walls.append(time.perf_counter() - start)
+    finally:
+        hdf5.COMPRESSION.update(saved)
+    size = os.path.getsize(target)
+    os.remove(target)
+    return float(np.median(walls)), size
+
+
 def main_job_particles():
     """The main job's particle count at its own resolution (built, not stepped)."""
     return {v: build_solver(load_scene(CASE, variant=v)[0], MPI.COMM_SELF).n_total for v in VARIANTS}
@@ -94,7 +130,8 @@ def main(argv=None):
         results = pmpm.run(CASE, overrides=over, write=True, comm=comm, dataframes=False)
         if comm.rank == 0:
             for variant in VARIANTS:
-                rows.append(dict(variant=variant, precision=precision, **measure(results[variant].path, scratch)))
+                rows.append(dict(variant=variant, precision=precision, path=results[variant].path,
+                                 **measure(results[variant].path, scratch)))
     if comm.rank != 0:
         return
     counts = main_job_particles()
@@ -124,6 +161,16 @@ def main(argv=None):
         summary["main_job"][precision] = {"old_MB": old, "new_MB": new, "ratio": old / new}
         print(f"main job, both variants, output.precision = {precision!r}: {old:.0f} MB before, "
               f"{new:.0f} MB after ({old / new:.2f}x smaller; extrapolated per particle-frame)")
+    plastic = [r for r in rows if r["variant"] == "elastoplastic" and r["precision"] == "double"][0]
+    source = plastic["path"]
+    summary["write_ms_per_frame"] = {}
+    for precision in PRECISIONS:
+        for compress in (True, False):
+            wall, size = write_cost(source, scratch, precision, compress)
+            key = f"{precision}{'' if compress else ' uncompressed'}"
+            summary["write_ms_per_frame"][key] = wall * 1e3
+            print(f"writing a frame of {plastic['particles']} particles (elastoplastic, one rank): "
+                  f"{key:20s} {wall * 1e3:7.2f} ms, file {size} bytes")
     if args.keep:
         shutil.copytree(scratch, args.keep, dirs_exist_ok=True)
     shutil.rmtree(scratch, ignore_errors=True)
