@@ -24,6 +24,10 @@ Each Uniform grid of the Temporal collection (one per complete frame, finite
   with 3) as one ``Scalar`` per component, named from the dataset's ``components``
   attribute (``sxx syy sxy szz``, ``exx eyy gxy``).
 
+The per-particle constants of layout 3 (``/particles/<name>``: ``x0``, ``m``, ...) are the same
+in every frame: every grid references the one dataset, without a view; ``id`` (layout 3 has no
+``/frames/id``: the rows are the ids) is ``/topology/vertices``.
+
 Removed particles have NaN positions and are simply not drawn.  The HDF5 file name is
 written relative to the sidecar, so the pair can be moved together.
 """
