@@ -215,7 +215,8 @@ def _all_early(path):
 
 
 class LayoutError(ValueError):
-    """A results file a restart cannot append to (its reason is the one line the user reads)."""
+    """A results file a restart cannot append to, or a frame that breaks the layout (a constant
+    that changed); its text is the reason the user reads in pmpm's one line."""
 
     user_reason = True
 
@@ -703,7 +704,8 @@ class OutputFile:
             self._const_blocks = {n: self.file[f"{PARTICLES}/{n}"][start:stop] if self._meta
                                   else blocks[n][:0] for n in self.const_specs}
         changed = [n for n, old in self._const_blocks.items() if not _same_where_present(old, blocks[n])]
-        check_all(self.comm, not changed, f"the per-particle constants {changed} changed between frames")
+        check_all(self.comm, not changed, f"the per-particle constants {changed} changed between frames",
+                  exc=LayoutError)
 
     def _add_views(self, frame, time):
         """The XDMF views of one frame (every rank that touches the file, same arguments)."""
