@@ -111,8 +111,8 @@ PRECISIONS = {"single": np.dtype(np.float32), "double": np.dtype(np.float64)}
 #: the filters of every particle dataset (frames and constants): the byte shuffle puts the
 #: bytes of equal significance together (sign and exponent bytes of neighbouring particles are
 #: alike), then deflate. Parallel HDF5 (>= 1.10.2) writes filtered chunks in collective writes,
-#: which is how every frame is written. Level 4: measured by studies/output_size.py, levels above
-#: it saved little more and cost more time per frame.
+#: which is how every frame is written. Level 4: in a one-off trial on the portal frame's frames,
+#: higher levels saved almost nothing more (docs/output.md, "What a frame costs").
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 # Names of the components of known fields, stored as the ``components`` attribute
@@ -460,8 +460,7 @@ class OutputFile:
         rows = self._chunk_rows(dtype)
         # Every row of a frame is written, so writing fill values first is wasted IO. One
         # component per chunk: neighbouring particles' values of one component are alike (and
-        # szz of plane stress all zero), so they compress better apart (by 7% here, measured
-        # on the portal frame's frames: docs/output.md)
+        # szz of plane stress all zero), so they compress better apart (docs/output.md)
         dset = frames.create_dataset(
             name, (0, self.n_total) + trailing, dtype,
             maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + (1,) * len(trailing), dcpl=_early(),
