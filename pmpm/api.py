@@ -358,6 +358,7 @@ def load_results(path, dataframes=None):
     import h5py
 
     from pmpm.io.hdf5 import check_results_file, read_history, read_series
+    from pmpm.io.layout import frame_fields
 
     path = os.fspath(path)
     try:  # the whole layout the reads below use (pmpm.io.validate)
@@ -375,8 +376,8 @@ def load_results(path, dataframes=None):
         stopped = _stop_record(f.attrs)
 
     def frames():
-        with h5py.File(path, "r") as f:
-            return {n: d[()][complete] for n, d in f["frames"].items() if n not in ("time", "step")}
+        with h5py.File(path, "r") as f:  # either layout, constants and ids per frame
+            return {n: d.read(complete) for n, d in frame_fields(f).items()}
 
     series = {g: _table(read_series(path, g), pandas) for g in groups}
     energies = series.pop("energies")

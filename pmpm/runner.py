@@ -428,7 +428,7 @@ class Run:
                           tracks=self.tracker.names, history_columns=list(HISTORY_COLUMNS),
                           energy_columns=list(ENERGY_COLUMNS), mode=self.scene.parallel.io,
                           append=self.restarted_from is not None, truncate_after=self.restarted_from,
-                          track_attrs=self.tracker.attrs(),
+                          track_attrs=self.tracker.attrs(), precision=self.scene.output.precision,
                           # the sidecar follows every frame, so a killed run leaves a current one
                           xdmf=self.path[:-3] + ".xdmf" if "x" in self.scene.output.fields else None)
 

@@ -254,6 +254,8 @@ def _write_reason(exc):
     """A short reason for a failed write (errno text if any: 'No space left on device')."""
     import errno
     text = str(exc)
+    if getattr(exc, "user_reason", False):  # a reason written for the user (hdf5.LayoutError)
+        return text
     for code in (errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EROFS, errno.EIO):
         name = os.strerror(code)
         if name in text or getattr(exc, "errno", None) == code:

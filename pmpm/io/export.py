@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from pmpm.io import ownership
+from pmpm.io.layout import frame_fields
 from pmpm.io.xdmf import view_items, write_xdmf
 from pmpm.io.plot import scene_stem
 
@@ -44,7 +45,7 @@ def _frame_mesh(frames, index):
     points[:, :2] = x[alive]
     data = {"id": alive.astype(np.int64)}
     for name, dset in frames.items():
-        if name not in ("time", "step") and dset.ndim >= 2:
+        if dset.ndim >= 2:
             rows = dset[index][alive]
             for label, _, component in view_items(name, dset):
                 data[label] = rows if component is None else rows[(slice(None),) + component]
@@ -89,10 +90,10 @@ def _export_vtu(h5_path, outdir, root=None):
     paths, entries = [], []
     _check_vtu_folder(outdir, root)
     with h5py.File(h5_path, "r") as f:
-        frames = f["frames"]
+        frames = frame_fields(f)  # either layout, constants and ids per frame (pmpm.io.layout)
         if "x" not in frames:  # checked before anything is written
             raise ValueError(f"{h5_path}: has no /frames/x to use as particle positions")
-        for index, time in enumerate(frames["time"][()]):
+        for index, time in enumerate(f["frames/time"][()]):
             if not np.isfinite(time):
                 continue  # cut short by a crash
             name = f"{stem}_{index:05d}.vtu"

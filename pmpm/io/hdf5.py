@@ -4,7 +4,7 @@ Layout
 ------
 Root attributes
     ``scene`` (the resolved scene as a JSON string), ``pmpm_version``, ``n_total``,
-    ``io_mode``, ``layout`` (``"pmpm-results-2"``), ``units`` (``"SI"``),
+    ``io_mode``, ``layout`` (``"pmpm-results-3"``, :mod:`pmpm.io.layout`), ``units`` (``"SI"``),
     ``restart_times`` (after restarts) and every other attribute handed to
     :class:`OutputFile` (dicts and lists of non-numbers as JSON strings).
 Every dataset
@@ -15,10 +15,17 @@ Every dataset
     Time and step of each frame.  A frame whose ``time`` is NaN was cut short by a
     crash (its fields are undefined); reopening with ``append=True`` drops it.
 ``/frames/<field>`` (F, n_total, \\*shape)
-    One dataset per frame field, chunked ``(1, rows, *shape)`` and resizable along F.
-    Row ``i`` is the particle with id ``i``; particles that no longer exist (removed
-    from the grid) read NaN (floats) or -1 (integers).  Fields with one trailing
-    axis carry a ``components`` attribute (e.g. ``sxx syy sxy szz`` for ``stress``).
+    One dataset per frame field that changes, chunked ``(1, rows, *shape)``, compressed
+    (:data:`COMPRESSION`) and resizable along F; floating-point fields in the writer's
+    ``precision`` (``"single"``: float32).  Row ``i`` is the particle with id ``i`` (no
+    ``/frames/id``: the ids are the rows); particles that no longer exist (removed from the
+    grid) read NaN (floats) or -1 (integers).  Fields with one trailing axis carry a
+    ``components`` attribute (e.g. ``sxx syy sxy szz`` for ``stress``).
+``/particles/<field>`` (n_total, \\*shape)
+    The per-particle constants among the frame fields (:data:`pmpm.io.layout.CONSTANT_FIELDS`:
+    ``x0``, ``m``, ``vol0``, ``mat``, ``body``), written once with the first frame, in the
+    dtype handed over; every later frame is checked to carry the same values.
+    :func:`pmpm.io.layout.frame_fields` reads them (and the implicit ``id``) back per frame.
 ``/topology/vertices`` (n_total,) int64
     ``0 .. n_total-1``: the explicit Polyvertex connectivity for the XDMF sidecar.
 ``/history/time`` (S,), ``/history/<track>`` (S, ncols) float64
@@ -67,6 +74,7 @@ import h5py
 import numpy as np
 
 from pmpm.io import schema
+from pmpm.io.layout import CONSTANT_FIELDS, LAYOUT, PARTICLES, READ_LAYOUTS, frame_fields, layout_of
 from pmpm.io._parallel import (
     check_all,
     fill_value,
@@ -84,6 +92,7 @@ from pmpm.io.validate import check_results_schema
 
 __all__ = [
     "OutputFile",
+    "LayoutError",
     "COMPONENT_NAMES",
     "read_attrs",
     "read_frame",
@@ -96,8 +105,15 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-LAYOUT = "pmpm-results-2"
 MODES = ("mpio", "gather")
+#: ``output.precision``: the element type of the floating-point fields of a frame
+PRECISIONS = {"single": np.dtype(np.float32), "double": np.dtype(np.float64)}
+#: the filters of every particle dataset (frames and constants): the byte shuffle puts the
+#: bytes of equal significance together (sign and exponent bytes of neighbouring particles are
+#: alike), then deflate. Parallel HDF5 (>= 1.10.2) writes filtered chunks in collective writes,
+#: which is how every frame is written. Level 4: in a one-off trial on the portal frame's frames,
+#: higher levels saved almost nothing more (docs/output.md, "What a frame costs").
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 # Names of the components of known fields, stored as the ``components`` attribute
 COMPONENT_NAMES = {
@@ -198,6 +214,27 @@ def _all_early(path):
     return not late
 
 
+class LayoutError(ValueError):
+    """A results file a restart cannot append to, or a frame that breaks the layout (a constant
+    that changed); its text is the reason the user reads in pmpm's one line."""
+
+    user_reason = True
+
+
+def _same_where_present(old, new):
+    """True if ``new`` equals ``old`` in every row where both hold a particle (not the fill)."""
+    if old.size == 0 or new.size == 0:
+        return True  # nothing to compare: no rows here (a rank outside the file in gather mode)
+    fill = fill_value(new.dtype)
+    width = int(np.prod(new.shape[1:], dtype=np.int64))
+    flat_old, flat_new = old.reshape(len(old), width), new.reshape(len(new), width)
+    if new.dtype.kind == "f":
+        present = np.all(np.isfinite(flat_old), axis=1) & np.all(np.isfinite(flat_new), axis=1)
+    else:
+        present = np.all(flat_old != fill, axis=1) & np.all(flat_new != fill, axis=1)
+    return bool(np.array_equal(flat_old[present], flat_new[present]))
+
+
 def _leading_count(times, t):
     """Return how many leading entries of ``times`` are finite and ``<= t``."""
     ok = np.isfinite(times)
@@ -247,6 +284,10 @@ class OutputFile:
         (:func:`pmpm.io.xdmf.add_frame_views`, metadata only) and rewrite the sidecar
         (rank 0), so a run that is killed leaves a sidecar of the frames written so far.
         Needs ``x`` among the frame fields.
+    precision : {"double", "single"}, optional
+        Element type of the floating-point fields that change per frame (``"single"``:
+        float32, half the bytes; the constants, histories and energies stay as handed over,
+        float64 for pmpm's runs).
 
     Raises
     ------
@@ -256,7 +297,7 @@ class OutputFile:
 
     def __init__(self, path, comm, attrs, n_total, frame_fields, tracks,
                  history_columns, energy_columns, mode="mpio", append=False,
-                 truncate_after=None, track_attrs=None, xdmf=None):
+                 truncate_after=None, track_attrs=None, xdmf=None, precision="double"):
         self.path = os.fspath(path)
         self.xdmf = os.fspath(xdmf) if xdmf is not None and "x" in frame_fields else None
         self._view_specs, self._view_frames = None, []   # the sidecar's frames: (index, time)
@@ -265,8 +306,20 @@ class OutputFile:
         self.rank, self.size = comm.Get_rank(), comm.Get_size()
         self.mode = self._resolve_mode(mode)
         self.n_total = int(n_total)
-        self.frame_specs = {name: (tuple(shape), np.dtype(dtype))
+        if precision not in PRECISIONS:
+            raise ValueError(f"unknown precision {precision!r}; valid: {', '.join(PRECISIONS)}")
+        # what the ranks hand over (validated, moved into id order) ...
+        self.field_specs = {name: (tuple(shape), np.dtype(dtype))
                             for name, (shape, dtype) in sorted(frame_fields.items())}
+        # ... split into the constants, written once, and what each frame stores
+        self.const_specs = {n: spec for n, spec in self.field_specs.items() if n in CONSTANT_FIELDS}
+        varying = {n: spec for n, spec in self.field_specs.items() if n not in self.const_specs}
+        if set(varying) - {"id"}:
+            varying.pop("id", None)  # the rows are the ids; existence reads off the fill values
+        self.frame_specs = {n: (trailing, PRECISIONS[precision] if dtype.kind == "f" else dtype)
+                            for n, (trailing, dtype) in varying.items()}
+        self.precision = precision
+        self._const_blocks = None  # this rank's id block of each constant, once written or read
         self.tracks = list(tracks)
         self.history_columns = list(history_columns)
         self.energy_columns = list(energy_columns)
@@ -320,8 +373,8 @@ class OutputFile:
         if self.n_total < 1:
             raise ValueError(f"n_total must be at least 1, got {self.n_total}")
         # Names become HDF5 paths, and time/step are datasets of the same groups
-        bad = [n for n in [*self.frame_specs, *self.tracks, *self.energy_columns] if not n or "/" in n]
-        bad += [n for n in self.frame_specs if n in ("time", "step")]
+        bad = [n for n in [*self.field_specs, *self.tracks, *self.energy_columns] if not n or "/" in n]
+        bad += [n for n in self.field_specs if n in ("time", "step")]
         bad += [n for n in self.tracks if n == "time"]
         if bad:
             raise ValueError(f"invalid field, track or column names: {bad}")
@@ -372,6 +425,12 @@ class OutputFile:
                                         fillvalue=-1), *schema.meta(schema.FIELDS, "step"))
         for name, (trailing, dtype) in self.frame_specs.items():
             self._create_frame_dataset(frames, name, trailing, dtype)
+        if self.const_specs:
+            particles = f.create_group(PARTICLES)
+            particles.attrs["description"] = ("per-particle constants, row i the particle of id i, "
+                                              "written once (the same in every frame)")
+            for name, (trailing, dtype) in self.const_specs.items():
+                self._create_constant_dataset(particles, name, trailing, dtype)
         self._write_vertices(f)
         hist = f.create_group("history")
         hist.attrs["columns"] = _strings(self.history_columns)
@@ -392,15 +451,32 @@ class OutputFile:
         f.flush()
         logger.info("created %s (%s mode, %d particles)", self.path, self.mode, self.n_total)
 
+    def _chunk_rows(self, dtype):
+        """Rows of one chunk: up to 1 MB of one component (chunks are one component wide)."""
+        return max(1, min(self.n_total, _TARGET_CHUNK_BYTES // dtype.itemsize))
+
     def _create_frame_dataset(self, frames, name, trailing, dtype):
         """Create ``/frames/<name>`` of shape (0, n_total, *trailing)."""
-        row_bytes = int(np.prod(trailing, dtype=np.int64)) * dtype.itemsize
-        rows = max(1, min(self.n_total, _TARGET_CHUNK_BYTES // max(row_bytes, 1)))
-        # Every row of a frame is written, so writing fill values first is wasted IO
+        rows = self._chunk_rows(dtype)
+        # Every row of a frame is written, so writing fill values first is wasted IO. One
+        # component per chunk: neighbouring particles' values of one component are alike (and
+        # szz of plane stress all zero), so they compress better apart (docs/output.md)
         dset = frames.create_dataset(
             name, (0, self.n_total) + trailing, dtype,
-            maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + trailing, dcpl=_early(),
-            fillvalue=fill_value(dtype), fill_time="never")
+            maxshape=(None, self.n_total) + trailing, chunks=(1, rows) + (1,) * len(trailing), dcpl=_early(),
+            fillvalue=fill_value(dtype), fill_time="never", **COMPRESSION)
+        self._label(dset, name, trailing)
+
+    def _create_constant_dataset(self, particles, name, trailing, dtype):
+        """Create ``/particles/<name>`` of shape (n_total, *trailing), filled with the first frame."""
+        rows = self._chunk_rows(dtype)
+        dset = particles.create_dataset(
+            name, (self.n_total,) + trailing, dtype, chunks=(rows,) + (1,) * len(trailing), dcpl=_early(),
+            fillvalue=fill_value(dtype), **COMPRESSION)
+        self._label(dset, name, trailing)
+
+    def _label(self, dset, name, trailing):
+        """The ``components``, ``units`` and ``description`` attributes of a particle field."""
         comps = component_names(name, trailing)
         if comps:
             dset.attrs["components"] = _strings(comps)
@@ -535,12 +611,21 @@ class OutputFile:
     def _check_layout(self):
         """Raise ValueError if the existing file does not match this writer's layout."""
         f, problems = self.file, []
+        layout = layout_of(f)
+        if layout != LAYOUT:
+            # an older layout is read (pmpm.io.layout) but never extended: one file, one layout
+            raise LayoutError(f"written by an older pmpm (layout {layout!r}); a restart "
+                             f"appends only to {LAYOUT!r} files: run the scene afresh")
         if int(f.attrs.get("n_total", -1)) != self.n_total:
             problems.append(f"n_total {f.attrs.get('n_total')} != {self.n_total}")
         for name, (trailing, dtype) in self.frame_specs.items():
             dset = f.get(f"frames/{name}")
             if dset is None or dset.shape[1:] != (self.n_total,) + trailing or dset.dtype != dtype:
                 problems.append(f"frame field {name!r} missing or of another shape/dtype")
+        for name, (trailing, dtype) in self.const_specs.items():
+            dset = f.get(f"{PARTICLES}/{name}")
+            if dset is None or dset.shape != (self.n_total,) + trailing or dset.dtype != dtype:
+                problems.append(f"constant {name!r} missing or of another shape/dtype")
         for track in self.tracks:
             dset = f.get(f"history/{track}")
             if dset is None or dset.shape[1] != len(self.history_columns):
@@ -578,11 +663,13 @@ class OutputFile:
             On every rank, if any rank's fields are missing, misshapen, carry ids
             outside ``[0, n_total)`` or repeat an id.
         """
-        message = validate_rows(fields, self.frame_specs, self.n_total)
+        message = validate_rows(fields, self.field_specs, self.n_total)
         check_all(self.comm, message is None, message)
-        blocks, duplicates = to_id_blocks(self.comm, fields, self.frame_specs, self._bounds)
+        blocks, duplicates = to_id_blocks(self.comm, fields, self.field_specs, self._bounds)
         check_all(self.comm, duplicates == 0, f"{duplicates} particle ids appear more than once")
         index, start = self.n_frames, int(self._bounds[self.rank])
+        if self.const_specs:
+            self._constants(blocks, start)
         if self._meta:
             frames = self.file["frames"]
             for name in ("time", "step", *self.frame_specs):
@@ -599,6 +686,25 @@ class OutputFile:
         self.n_frames = index + 1
         if self.xdmf:
             self._guarded(self._refresh_sidecar)
+
+    def _constants(self, blocks, start):
+        """Write the constants with the first frame (or read this rank's block of them after a
+        restart); later frames must carry the same values for every particle that exists
+        (collective; a particle the solver changed is a bug, refused on every rank)."""
+        if self._const_blocks is None:
+            if self.n_frames == 0:
+                if self._meta:
+                    for name in self.const_specs:
+                        write_rows(self.file[f"{PARTICLES}/{name}"], (), start, blocks[name],
+                                   self._driver == "mpio")
+                self._const_blocks = {n: blocks[n] for n in self.const_specs}
+                return
+            stop = int(self._bounds[self.rank + 1])
+            self._const_blocks = {n: self.file[f"{PARTICLES}/{n}"][start:stop] if self._meta
+                                  else blocks[n][:0] for n in self.const_specs}
+        changed = [n for n, old in self._const_blocks.items() if not _same_where_present(old, blocks[n])]
+        check_all(self.comm, not changed, f"the per-particle constants {changed} changed between frames",
+                  exc=LayoutError)
 
     def _add_views(self, frame, time):
         """The XDMF views of one frame (every rank that touches the file, same arguments)."""
@@ -788,9 +894,9 @@ def read_frame(h5, index, fields=None):
     """
     f, close = _opened(h5)
     try:
-        frames = f["frames"]
-        names = fields or [n for n in frames if n not in ("time", "step")]
-        return float(frames["time"][index]), {n: frames[n][index] for n in names}
+        stored = frame_fields(f)  # either layout (pmpm.io.layout), constants and ids expanded
+        names = fields or list(stored)
+        return float(f["frames/time"][index]), {n: stored[n][index] for n in names}
     finally:
         if close:
             f.close()
@@ -907,12 +1013,12 @@ def _check_results_path(path):
 
 def _check_results_open(f):
     """The checks of :func:`check_results_file` on the open file (ValueError)."""
-    layout = f.attrs.get("layout")
-    layout = layout.decode() if isinstance(layout, bytes) else layout
+    layout = layout_of(f)
     if not isinstance(layout, str) or not layout.startswith("pmpm-results-"):
         raise ValueError("not a pmpm results file (no 'layout' attribute of pmpm)")
-    if layout != LAYOUT:
-        raise ValueError(f"results layout {layout!r}, this pmpm reads {LAYOUT!r} (re-run the scene)")
+    if layout not in READ_LAYOUTS:
+        raise ValueError(f"results layout {layout!r}, this pmpm reads {', '.join(map(repr, READ_LAYOUTS))} "
+                         f"(re-run the scene)")
     missing = [g for g in ("frames", "history", "energies") if g not in f]
     if missing:
         raise ValueError(f"not a complete pmpm results file (no /{missing[0]})")

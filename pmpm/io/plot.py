@@ -40,6 +40,7 @@ from pmpm.core.effects import energy_terms
 from pmpm.io import schema
 from pmpm.io import ownership
 from pmpm.io.hdf5 import read_attrs, read_energies, read_history
+from pmpm.io.layout import frame_fields
 from pmpm.scene.names import energies_png, history_png
 
 __all__ = ["plot_results", "plot_deformed", "energy_balance_error", "energy_figure",
@@ -317,8 +318,8 @@ def plot_deformed(h5_path, frame_index, color_field, scale, out_png):
         ``out_png``.
     """
     with h5py.File(h5_path, "r") as f:
-        frames = f["frames"]
-        time = float(frames["time"][frame_index])
+        frames = frame_fields(f)  # either layout (pmpm.io.layout)
+        time = float(f["frames/time"][frame_index])
         x = frames["x"][frame_index]
         x0 = frames["x0"][frame_index] if "x0" in frames else frames["x"][0]
         values, label = _color_values(frames, frame_index, color_field)

@@ -7,6 +7,7 @@ import numpy as np
 
 from pmpm.io import ownership
 from pmpm.io.hdf5 import read_history
+from pmpm.io.layout import frame_fields
 from pmpm.scene.names import deformed_png, track_csv
 from pmpm.io.plot import scene_stem
 from pmpm.io import plot_results
@@ -67,7 +68,7 @@ def _deformed(h5_path, spec, outdir):
         u = np.abs(tracks[spec["track"]][:, cols.index(spec["component"])])
         t_peak = ht[int(np.argmax(u))]
         frame = int(np.argmin(np.abs(times - t_peak)))
-        color = spec["color"] if f"frames/{spec['color']}" in f else "x"
+        color = spec["color"] if spec["color"] in frame_fields(f) else "x"
     out = os.path.join(outdir, deformed_png(_run(h5_path)))
     plot_deformed(h5_path, frame, color, spec["scale"], out)
     return out

@@ -198,6 +198,17 @@ def check_results_schema(f):
         if d.ndim < 2 or d.shape[:2] != (count, n) or (trailing is not None and d.shape[2:] != trailing):
             want = (count, n) + (trailing if trailing is not None else ())
             raise ValueError(f"/frames/{name} has shape {d.shape}, expected {want}")
+    if "particles" in f:  # layout 3: the per-particle constants, written once (pmpm.io.layout)
+        particles = _group(f, "particles")
+        for name in particles:
+            d = _dataset(particles, name, "/particles")
+            _numeric(d, f"/particles/{name}")
+            trailing = FIELD_TRAILING.get(name)
+            if d.ndim < 1 or d.shape[0] != n or (trailing is not None and d.shape[1:] != trailing):
+                want = (n,) + (trailing if trailing is not None else ())
+                raise ValueError(f"/particles/{name} has shape {d.shape}, expected {want}")
+            if name in frames:
+                raise ValueError(f"/particles/{name} is also a frame field")
     if "x" in frames and frames["x"].dtype.kind != "f":
         raise ValueError("/frames/x holds no floating-point positions")
     hist = _group(f, "history")

@@ -24,6 +24,10 @@ Each Uniform grid of the Temporal collection (one per complete frame, finite
   with 3) as one ``Scalar`` per component, named from the dataset's ``components``
   attribute (``sxx syy sxy szz``, ``exx eyy gxy``).
 
+The per-particle constants of layout 3 (``/particles/<name>``: ``x0``, ``m``, ...) are the same
+in every frame: every grid references the one dataset, without a view; ``id`` (layout 3 has no
+``/frames/id``: the rows are the ids) is ``/topology/vertices``.
+
 Removed particles have NaN positions and are simply not drawn.  The HDF5 file name is
 written relative to the sidecar, so the pair can be moved together.
 """
@@ -38,6 +42,7 @@ import h5py
 import numpy as np
 
 from pmpm.io import ownership
+from pmpm.io.layout import PARTICLES
 
 __all__ = ["write_xdmf", "write_views", "add_frame_views", "view_specs", "write_document", "sidecar_path",
            "xdmf_number_type", "VIEWS"]
@@ -156,9 +161,19 @@ def write_views(h5_path):
 def view_specs(f):
     """What the views of one frame need, read once from the open results file ``f`` (HDF5
     attribute and property reads are slow): per frame field its path, shape, dtype, units and
-    :func:`view_items`."""
-    return [(dset.name, dset.shape, dset.dtype, dset.attrs.get("units"), view_items(name, dset))
-            for name, dset in _frame_fields(f["frames"])]
+    :func:`view_items`; then the per-particle constants (``/particles/<name>``, layout 3), which
+    every frame's grid references as they are (no view: they are the same in every frame)."""
+    specs = [(dset.name, dset.shape, dset.dtype, dset.attrs.get("units"), view_items(name, dset))
+             for name, dset in _frame_fields(f["frames"])]
+    for name, dset in (f[PARTICLES].items() if PARTICLES in f else ()):
+        if dset.shape[1:] in ((), (2,)):  # a scalar or a 2-vector: one Attribute, the whole dataset
+            kind = "Scalar" if dset.ndim == 1 else "Vector"
+            specs.append((dset.name, dset.shape, dset.dtype, dset.attrs.get("units"), [(name, kind, None)]))
+    return specs
+
+
+def _constant(source):
+    return source.startswith(f"/{PARTICLES}/")
 
 
 def add_frame_views(f, frame, time, specs=None):
@@ -176,6 +191,8 @@ def add_frame_views(f, frame, time, specs=None):
     g = group.create_group(f"frame_{frame:05d}")
     g.attrs["time"] = float(time)
     for source, shape, dtype, units, items in (specs if specs is not None else view_specs(f)):
+        if _constant(source):
+            continue
         # the source's shape when the frame was written: its later frames lie outside the selection
         shape = (max(shape[0], frame + 1),) + tuple(shape[1:])
         for label, _, index in items:
@@ -220,7 +237,15 @@ def _uniform_grid(collection, h5_name, n, specs, frame, time):
     for source, shape, dtype, _, items in specs:
         for label, kind, index in items:
             attr = ET.SubElement(grid, "Attribute", Name=label, AttributeType=kind, Center="Node")
-            _heavy(attr, h5_name, f"{views}/{label}", (n,) + (tuple(shape[2:]) if index is None else ()), dtype)
+            if _constant(source):
+                _heavy(attr, h5_name, source, shape, dtype)
+            else:
+                _heavy(attr, h5_name, f"{views}/{label}", (n,) + (tuple(shape[2:]) if index is None else ()),
+                       dtype)
+    if not any(source == "/frames/id" for source, *_ in specs):
+        # layout 3 keeps no per-frame ids (the rows are the ids): the connectivity is the id
+        attr = ET.SubElement(grid, "Attribute", Name="id", AttributeType="Scalar", Center="Node")
+        _heavy(attr, h5_name, "/topology/vertices", (n,), np.int64)
 
 
 def _spec_dtype(specs, source):

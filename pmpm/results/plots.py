@@ -6,6 +6,7 @@ import math
 import h5py
 import numpy as np
 
+from pmpm.io.layout import frame_fields
 from pmpm.io.plot import _legend
 from pmpm.results.hinges import hinge_rows
 
@@ -71,8 +72,9 @@ def plot_utilisation(sections, path, label):
 
 def _outline(h5_path):
     with h5py.File(h5_path, "r") as f:
-        name = "x0" if "frames/x0" in f else "x"
-        return f[f"frames/{name}"][0] if f[f"frames/{name}"].shape[0] else np.zeros((0, 2))
+        frames = frame_fields(f)  # either layout: x0 per frame, or once (pmpm.io.layout)
+        field = frames["x0"] if "x0" in frames else frames["x"]
+        return field[0] if field.shape[0] else np.zeros((0, 2))
 
 
 #: up to this many cuts, each is labelled on the map with its name and times; beyond it (a

@@ -154,6 +154,7 @@ class OutputConfig:
     progress_interval: float
     sections: tuple = ()               # SectionConfig
     hysteresis: Optional[dict] = None  # base shear against a tracked drift
+    precision: str = "single"          # of the frames' floating-point fields (docs/output.md)
 
 
 @dataclass(frozen=True)
@@ -680,6 +681,7 @@ def _output(t, stem, end_time, state_fields=(), bodies=(), grid=None):
         interval=t.number("interval", end_time / 20, low=0, low_open=True),
         history_interval=t.number("history_interval", end_time / 1000, low=0, low_open=True),
         fields=tuple(fields), track=tuple(tracks),
+        precision=t.string("precision", "single", choices=("single", "double")),
         checkpoint_interval=t.number("checkpoint_interval", None, low=0, low_open=True),
         deformed_plot=deformed_plot,
         progress_interval=t.number("progress_interval", 2.0, low=0),

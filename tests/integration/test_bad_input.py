@@ -571,8 +571,9 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
     try:
-        # 800 particles; a frame of x, v, stress is 58 KB, a checkpoint 100 KB: two checkpoints
-        # and a dozen frames fit in 1 MB, the run's 100 frames do not
+        # 800 particles; a frame of x, v, stress is 58 KB in float64 (less as written:
+        # float32, compressed), a checkpoint 100 KB: two checkpoints and a few dozen frames fit in
+        # 1 MB, the run's 100 frames do not
         scene = (BASE.replace("cell_size = 0.5", "cell_size = 0.1").replace("cells = [8, 4]", "cells = [40, 20]")
                  .replace("end_time = 0.01", "end_time = 0.5")
                  + '\n[output]\ndirectory = "disk/out"\ninterval = 0.005\ncheckpoint_interval = 0.02\n')
@@ -590,7 +591,8 @@ def test_full_disk_stops_with_one_line_naming_the_file(tmp_path, ranks):
         room = tmp_path / "room"
         shutil.copytree(disk, room / "disk")
         shutil.copy(tmp_path / "case.toml", room / "case.toml")
-        (room / "case.toml").write_text(scene.replace("end_time = 0.5", "end_time = 0.1"))
+        # a little beyond the newest checkpoint (where the disk filled depends on the frames' size)
+        (room / "case.toml").write_text(scene.replace("end_time = 0.5", f"end_time = {max(complete) + 0.02:.6g}"))
         proc = run_cli(room, "case.toml", "--restart", "disk/out/case.h5", "--no-plots", timeout=300)
         assert proc.returncode == 0, proc.stderr.decode()
         assert f"t = {max(complete):.6g} s" in proc.stdout.decode()

@@ -45,7 +45,8 @@ from pmpm.io import read_energies, read_history
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BAR = (open(os.path.join(ROOT, "cases", "bar.toml")).read()
        .replace("end_time = 10.0", "end_time = 2.0")
-       .replace("interval = 0.5\n", "interval = 0.5\ncheckpoint_interval = 0.3\n", 1))
+       # precision: the frames are compared to round-off, so they keep the solver's float64
+       .replace("interval = 0.5\n", "interval = 0.5\ncheckpoint_interval = 0.3\nprecision = \"double\"\n", 1))
 
 #: kills every rank of the command line with SIGKILL at the phase $KILL_PHASE of the second
 #: checkpoint; the patched functions are looked up where runner.py calls them

@@ -23,6 +23,7 @@ from mpi4py import MPI
 
 from pmpm.io import OutputFile, checkpoint_paths, read_checkpoint, write_checkpoint
 from pmpm.io.hdf5 import read_energies, read_history
+from pmpm.io.layout import frame_fields
 
 comm = MPI.COMM_WORLD
 pytestmark = pytest.mark.mpi(min_size=1)
@@ -137,9 +138,11 @@ def test_frame_with_empty_rank_reads_back_in_id_order(shared_dir, mode, n_total)
             assert f.attrs["variant"] == "elastic" and '"dx": 0.1' in f.attrs["scene"]
             assert list(f.attrs["history_columns"]) == HISTORY_COLUMNS
             assert list(f["frames/stress"].attrs["components"]) == ["sxx", "syy", "sxy", "szz"]
-            for name in FRAME_FIELDS:
-                got = f["frames"][name][()]
-                assert got.shape == (2, n_total) + FRAME_FIELDS[name][0]
+            stored = frame_fields(f)  # mat is a constant, written once (pmpm.io.layout)
+            assert "mat" in f["particles"] and "id" not in f["frames"]
+            for name in [*FRAME_FIELDS, "id"]:
+                got = stored[name][()]
+                assert got.shape == (2, n_total) + FRAME_FIELDS.get(name, ((), "i8"))[0]
                 for frame in range(2):
                     np.testing.assert_array_equal(got[frame], expected[name])
             np.testing.assert_array_equal(f["topology/vertices"][()], np.arange(n_total))
@@ -155,7 +158,7 @@ def test_missing_id_reads_nan(shared_dir):
 
     def check():
         with h5py.File(path, "r") as f:
-            x, mat = f["frames/x"][0], f["frames/mat"][0]
+            x, mat = f["frames/x"][0], frame_fields(f)["mat"][0]
         assert np.isnan(x[[0, 4, 8]]).all() and np.isfinite(np.delete(x, [0, 4, 8], axis=0)).all()
         return list(mat[[0, 4, 8]]) == [-1, -1, -1]
 
@@ -287,6 +290,103 @@ def test_truncate_after_drops_later_rows(shared_dir, mode):
             return list(f["energies/kinetic"][()]) == [1.0, 1.0, 7.0]
 
     assert on_root(check)
+
+
+# ------------------------------------------------------------------ every field, both precisions
+#: every particle field a run can write (pmpm/io/schema.py), with the solver's dtypes
+ALL_FIELDS = {"x": ((2,), "f8"), "x0": ((2,), "f8"), "v": ((2,), "f8"), "m": ((), "f8"),
+              "vol": ((), "f8"), "vol0": ((), "f8"), "stress": ((4,), "f8"), "back_stress": ((4,), "f8"),
+              "strain": ((3,), "f8"), "eps_p": ((3,), "f8"), "F": ((5,), "f8"), "eps_p_eq": ((), "f8"),
+              "plastic_work": ((), "f8"), "damage": ((), "f8"), "fracture_work": ((), "f8"),
+              "crack_strain": ((2,), "f8"), "effective_stress": ((4,), "f8"), "mat": ((), "i4"),
+              "body": ((), "i4")}
+ROUND_TRIP_N, ROUND_TRIP_FRAMES, REMOVED, REMOVED_FROM = 13, 3, 4, 2
+#: IEEE single precision rounds to nearest: |fl32(a) - a| <= 2**-24 |a| (unit roundoff)
+UNIT_ROUNDOFF_F4 = 2.0 ** -24
+
+
+def _all_values(ids, frame):
+    """Every field as a function of the id and the frame, none exactly representable in float32
+    (multiples of pi, offsets of 6 m as the portal frame's positions); constants of the id only."""
+    f = ids.astype(float) * np.pi + 6.0
+    out = {"id": ids.astype(np.int64)}
+    for k, (name, (trailing, dtype)) in enumerate(sorted(ALL_FIELDS.items())):
+        width = int(np.prod(trailing, dtype=int))
+        lag = 0 if name in ("x0", "m", "vol0", "mat", "body") else frame + 1
+        base = f[:, None] * (1.0 + 0.1 * np.arange(width)) + lag * np.e + k * 0.37
+        out[name] = (base.astype(dtype) if dtype == "f8" else ids[:, None] % 5 + k).reshape((len(ids),) + trailing)
+    return out
+
+
+def _migrating_particles(frame):
+    """This rank's particles of ``frame``: every id but REMOVED from frame REMOVED_FROM on, dealt
+    to the ranks anew each frame (as migration moves them), none on EMPTY_RANK in frame 1."""
+    ids = np.array([i for i in range(ROUND_TRIP_N) if not (i == REMOVED and frame >= REMOVED_FROM)])
+    holders = [r for r in range(comm.size) if comm.size == 1 or frame != 1 or r != EMPTY_RANK]
+    owner = np.array([holders[(i + frame) % len(holders)] for i in range(len(ids))])
+    mine = ids[owner == comm.rank]
+    np.random.default_rng(frame * 7 + comm.rank).shuffle(mine)
+    return {k: v.copy() for k, v in _all_values(mine, frame).items()}
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+@pytest.mark.parametrize("mode", ["mpio", "gather"])
+def test_every_field_round_trips(shared_dir, mode, precision):
+    """Every field of every frame reads back (pmpm.io.layout.frame_fields and load_results) as
+    written: exactly at double precision and for the constants (written once, float64) and
+    integers; within the unit roundoff of IEEE single for the changing floats at single. The
+    removed particle reads NaN / -1 from its frame on. Particles change rank between frames.
+    Shown to fail: with the constants' first write skipped (hdf5.OutputFile._constants) they
+    read the fill value; with the rows stored as float16 instead of float32 the bound fails."""
+    from pmpm.api import load_results
+    path = os.path.join(shared_dir, f"all_{mode}_{precision}.h5")
+    with OutputFile(path, comm, {"scene": "{}"}, ROUND_TRIP_N, ALL_FIELDS, [], [], ["time"], mode=mode,
+                    precision=precision) as out:
+        for frame in range(ROUND_TRIP_FRAMES):
+            out.write_frame(0.1 * frame, frame, _migrating_particles(frame))
+
+    def check():
+        result = load_results(path).frames
+        with h5py.File(path, "r") as f:
+            assert sorted(f["particles"]) == ["body", "m", "mat", "vol0", "x0"]
+            assert "id" not in f["frames"] and "x0" not in f["frames"]
+            stored = frame_fields(f)
+            assert sorted(stored) == sorted([*ALL_FIELDS, "id"])
+            for name, field in stored.items():
+                dset = f["particles"].get(name) if name in f["particles"] else f["frames"].get(name)
+                if dset is not None:  # every particle dataset compressed (the id is implicit)
+                    assert dset.compression == "gzip" and dset.shuffle, name
+                single = precision == "single" and name in f["frames"] and field.dtype.kind == "f"
+                assert field.dtype == (np.float32 if single else np.dtype(ALL_FIELDS.get(name, ((), "i8"))[1]))
+                for frame in range(ROUND_TRIP_FRAMES):
+                    want = _all_values(np.arange(ROUND_TRIP_N), frame)[name]
+                    got = field[frame]
+                    np.testing.assert_array_equal(result[name][frame], got)
+                    gone = frame >= REMOVED_FROM
+                    if gone:
+                        assert np.all(np.isnan(got[REMOVED]) if got.dtype.kind == "f" else got[REMOVED] == -1), name
+                    keep = np.arange(ROUND_TRIP_N) != REMOVED if gone else slice(None)
+                    if single:
+                        err = np.abs(got[keep].astype(float) - want[keep])
+                        assert np.all(err <= UNIT_ROUNDOFF_F4 * np.abs(want[keep])), (name, err.max())
+                        assert np.any(err > 0), name  # really stored in float32
+                    else:
+                        np.testing.assert_array_equal(got[keep], want[keep])
+        return True
+
+    assert on_root(check)
+
+
+def test_a_changed_constant_is_refused_on_every_rank(shared_dir):
+    """The writer stores x0, m, vol0, mat, body once; a frame that carries other values for a
+    particle (a solver that changed one) raises on every rank instead of being lost."""
+    path = os.path.join(shared_dir, "constants.h5")
+    with OutputFile(path, comm, {"scene": "{}"}, ROUND_TRIP_N, ALL_FIELDS, [], [], ["time"]) as out:
+        out.write_frame(0.0, 0, _migrating_particles(0))
+        fields = _migrating_particles(1)
+        fields["m"] = fields["m"] * (1.0 + 1e-12)
+        with pytest.raises(ValueError, match=r"per-particle constants \['m'\] changed"):
+            out.write_frame(0.1, 1, fields)
 
 
 def test_append_drops_frame_cut_short_and_checks_layout(shared_dir):

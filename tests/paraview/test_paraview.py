@@ -12,8 +12,11 @@ A short portal frame (cases/portal_frame.toml, elastic variant, end time 5 ms, a
 - the VTU series written by ``pmpm export --format vtu`` (its .pvd),
 
 and each time the time steps must be the HDF5 file's ``/frames/time`` and the named component
-``sxx`` at the last step, with its points, the HDF5 file's values (exactly: the same float64
-numbers read by the HDF5 library or written to VTU as float64). Each also renders a PNG,
+``sxx`` at the last step, with its points, the HDF5 file's values (exactly: the same numbers,
+float32 at the default ``output.precision``, read by the HDF5 library out of the compressed
+datasets or written to VTU as they are). The initial positions ``x0`` (stored once, in
+``/particles``, and referenced by every time step) and the ids (the rows) must be among the
+arrays, with the file's values. Each also renders a PNG,
 which must show more than the background.
 Runtime: 45-75 s here (2 vCPUs, shared), after the install and the kernels' compilation.
 Run alone:  python -m pytest -q tests/paraview
@@ -146,9 +149,9 @@ def _assert_matches_h5(report, h5, expected_reader):
         x = f["frames/x"][-1]
         sxx = f["frames/stress"][-1, :, 0]
     assert report["reader"] == expected_reader
-    # the same float64 numbers, written by pmpm and read back: no tolerance needed
+    # the same numbers, written by pmpm and read back: no tolerance needed
     np.testing.assert_array_equal(report["times"], times)
-    assert {"sxx", "syy", "sxy", "szz", "exx", "eyy", "gxy", "v"} <= set(report["arrays"])
+    assert {"sxx", "syy", "sxy", "szz", "exx", "eyy", "gxy", "v", "x0", "id"} <= set(report["arrays"])
     alive = np.all(np.isfinite(x), axis=1)
     points, values = np.array(report["points"]), np.array(report["values"])
     # the sidecar keeps every id (removed particles at NaN), the VTU only the existing ones
@@ -163,6 +166,16 @@ def test_xdmf_opens_with_the_default_reader(paraview, run):
     report, png = _probe(paraview, xdmf, "sxx")
     _assert_matches_h5(report, h5, "Xdmf3ReaderS")
     _assert_image_shows_data(png)
+
+
+def test_xdmf_constants_open_with_the_default_reader(paraview, run):
+    """x0 is written once (/particles/x0) and referenced by every time step of the sidecar:
+    ParaView's default reader gives the file's initial positions at the last step."""
+    h5, xdmf, _ = run
+    report, _ = _probe(paraview, xdmf, "x0")
+    with h5py.File(h5, "r") as f:
+        x0 = f["particles/x0"][()]
+    np.testing.assert_array_equal(np.array(report["values"])[:, :2], x0)
 
 
 def test_xdmf_opens_with_the_legacy_reader(paraview, run):

@@ -225,7 +225,7 @@ def not_results(tmp_path):
     (["plot", "notes.h5"], "notes.h5: not an HDF5 file"),
     (["plot", "other.h5"], "other.h5: not a pmpm results file"),
     (["plot", "missing.h5"], "missing.h5: no such file"),
-    (["plot", "old.h5"], "old.h5: results layout 'pmpm-results-1', this pmpm reads 'pmpm-results-2'"),
+    (["plot", "old.h5"], "old.h5: results layout 'pmpm-results-1', this pmpm reads 'pmpm-results-3', 'pmpm-results-2'"),
     (["export", "notes.h5"], "notes.h5: not an HDF5 file"),
     (["export", "other.h5", "--format", "xdmf"], "other.h5: not a pmpm results file"),
     (["export", "missing.h5", "--format", "vtu"], "missing.h5: no such file"),

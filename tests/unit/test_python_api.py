@@ -38,9 +38,14 @@ def test_the_examples_of_docs_api_md_run(in_copy):
     assert os.path.isfile(in_copy / "bar_api" / "bar.h5")
 
 
-def test_in_memory_and_written_results_agree(in_copy):
-    """write=False keeps what write=True writes: the same histories, energies and frames."""
-    over = {"solver.end_time": 1.0, "output.directory": "out"}
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_in_memory_and_written_results_agree(in_copy, precision):
+    """write=False keeps what write=True writes: the same histories, energies and frames; at
+    output.precision = "single" the file's changing float fields are the in-memory float64 values
+    rounded to the nearest float32 (IEEE round to nearest: exactly ``np.float32(value)``), the
+    constants (x0, m, ...) and everything else unchanged."""
+    over = {"solver.end_time": 1.0, "output.directory": "out", "output.precision": precision,
+            "output.fields": ["x", "x0", "v", "m", "stress", "strain", "mat"]}
     mem = pmpm.run("cases/bar.toml", overrides=over, dataframes=False)
     disk = pmpm.run("cases/bar.toml", overrides=over, write=True, dataframes=False)
     assert mem.path is None and disk.path == os.path.join("out", "bar.h5")
@@ -50,8 +55,11 @@ def test_in_memory_and_written_results_agree(in_copy):
     np.testing.assert_array_equal(mem.energies, disk.energies)
     np.testing.assert_array_equal(mem.frame_times, disk.frame_times)
     assert sorted(mem.frames) == sorted(disk.frames)
+    rounded = {"x", "v", "stress", "strain"} if precision == "single" else set()
     for name in mem.frames:
-        np.testing.assert_array_equal(mem.frames[name], disk.frames[name])
+        want = mem.frames[name].astype(np.float32) if name in rounded else mem.frames[name]
+        assert disk.frames[name].dtype == want.dtype, name
+        np.testing.assert_array_equal(want, disk.frames[name])
     with h5py.File(disk.path, "r") as f:
         # the id the file stores for a track is the particle whose x0 is nearest the point
         x0 = f["frames/x"][0]

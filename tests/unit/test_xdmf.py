@@ -5,6 +5,11 @@ reference (no HyperSlab: ParaView's default reader and meshio do not read those)
 existing dataset with the stated Dimensions and number type, holding exactly the frame data
 its Attribute (or Geometry) claims to be. meshio's XDMF time-series reader, a real client,
 must then give the same times and arrays as h5py.
+
+Every test runs on a file of the current layout and on the same file written in the layout of
+pmpm before issue 40 (``pmpm-results-2``: ids and constants in every frame, float64,
+uncompressed; :func:`pmpm.io.legacy.write_layout2`), which pmpm still reads; the expected values
+come through :func:`pmpm.io.layout.frame_fields`, the one reader of both.
 """
 
 import os
@@ -17,6 +22,8 @@ import pytest
 from mpi4py import MPI
 
 from pmpm.io import OutputFile, export, write_xdmf
+from pmpm.io.layout import frame_fields
+from pmpm.io.legacy import write_layout2
 from pmpm.io.xdmf import xdmf_number_type
 
 N_TOTAL = 7
@@ -46,9 +53,10 @@ def particles(frame, ids):
     }
 
 
-@pytest.fixture
-def results(tmp_path):
-    """A results file with three frames; particle MISSING is removed after frame 0."""
+@pytest.fixture(params=["current", "old"])
+def results(tmp_path, request):
+    """A results file with three frames; particle MISSING is removed after frame 0; in the
+    current layout or in the old one."""
     path = tmp_path / "run" / "res.h5"
     path.parent.mkdir()
     ids = np.arange(N_TOTAL, dtype=np.int64)[::-1].copy()
@@ -57,6 +65,10 @@ def results(tmp_path):
         for frame, time in enumerate(TIMES):
             alive = ids if frame == 0 else ids[ids != MISSING]
             out.write_frame(time, frame, particles(frame, alive))
+    if request.param == "old":
+        old = path.parent / "old.h5"
+        write_layout2(path, old, views=False)
+        os.replace(old, path)
     return str(path)
 
 
@@ -84,7 +96,7 @@ def _evaluate(item, xdmf_dir, f):
 
 def _expected(f, frame, name):
     """The frame data an Attribute named ``name`` should hold."""
-    frames = f["frames"]
+    frames = frame_fields(f)
     if name in frames:
         return frames[name][frame]
     for field, dset in frames.items():
@@ -117,14 +129,22 @@ def test_xdmf_references_match_the_hdf5_file(results):
             for attr in grid.findall("Attribute"):
                 names.append(attr.get("Name"))
                 got = _evaluate(attr.find("DataItem"), xdmf_dir, f)
-                np.testing.assert_array_equal(got, _expected(f, frame, attr.get("Name")))
+                want = _expected(f, frame, attr.get("Name"))
+                if "/views/" not in attr.find("DataItem").text:
+                    # layout 3: constants and ids are referenced once for every frame, so a
+                    # removed particle (NaN position: not drawn) shows its values there
+                    alive = np.isfinite(frame_fields(f)["x"][frame][:, 0])
+                    got, want = got[alive], want[alive]
+                np.testing.assert_array_equal(got, want)
                 kind = {1: "Scalar", 2: "Vector"}[got.ndim if got.ndim == 1 else got.shape[1]]
                 assert attr.get("AttributeType") == kind and attr.get("Center") == "Node"
             assert {"sxx", "syy", "sxy", "szz", "exx", "eyy", "gxy", "v", "x", "mat"} <= set(names)
     assert "HyperSlab" not in open(xdmf).read()
     # The removed particle reads NaN from frame 1 on
     with h5py.File(results, "r") as f:
-        assert np.isnan(f["frames/x"][1, MISSING]).all() and f["frames/mat"][2, MISSING] == -1
+        stored = frame_fields(f)
+        assert np.isnan(stored["x"][1][MISSING]).all() and stored["mat"][2][MISSING] == -1
+        assert stored["id"][2][MISSING] == -1 and stored["id"][0][MISSING] == MISSING
 
 
 def test_meshio_reads_the_sidecar(results):
@@ -140,13 +160,22 @@ def test_meshio_reads_the_sidecar(results):
             np.testing.assert_array_equal(point_data["x"], f["frames/x"][frame])
             np.testing.assert_array_equal(point_data["sxy"], f["frames/stress"][frame, :, 2])
             np.testing.assert_array_equal(point_data["gxy"], f["frames/strain"][frame, :, 2])
-            np.testing.assert_array_equal(point_data["mat"], f["frames/mat"][frame])
+            alive = np.isfinite(f["frames/x"][frame][:, 0])  # a constant: drawn particles' rows
+            np.testing.assert_array_equal(point_data["mat"][alive], frame_fields(f)["mat"][frame][alive])
 
 
 def test_views_follow_a_restart(results):
     """Views are rebuilt from scratch: after frames are dropped and others written, each view
     reads its own frame's data (a stale mapping would read the old or the fill values)."""
     write_xdmf(results)
+    with h5py.File(results, "r") as f:
+        old = f.attrs["layout"] != "pmpm-results-3"
+    if old:  # a restart never appends to a file of the old layout: refused in one line
+        with pytest.raises(ValueError, match=r"^written by an older pmpm \(layout 'pmpm-results-2'\); a "
+                                             r"restart appends only to 'pmpm-results-3' files"):
+            OutputFile(results, MPI.COMM_SELF, {"scene": "{}"}, N_TOTAL, FRAME_FIELDS, [], [], ["time"],
+                       append=True, truncate_after=TIMES[1])
+        return
     with OutputFile(results, MPI.COMM_SELF, {"scene": "{}"}, N_TOTAL, FRAME_FIELDS, [], [], ["time"],
                     append=True, truncate_after=TIMES[1]) as out:
         out.write_frame(0.5, 9, particles(7, np.arange(N_TOTAL)))
@@ -187,7 +216,7 @@ def test_export_vtu_round_trip(results, tmp_path):
             assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(alive)
             np.testing.assert_array_equal(mesh.point_data["id"], alive)
             for name in ("x", "v", "mat", "eps_p_eq"):
-                np.testing.assert_array_equal(mesh.point_data[name], f["frames"][name][frame][alive])
+                np.testing.assert_array_equal(mesh.point_data[name], frame_fields(f)[name][frame][alive])
             # several components: one array each, named
             for k, name in enumerate(("sxx", "syy", "sxy", "szz")):
                 np.testing.assert_array_equal(mesh.point_data[name], f["frames/stress"][frame][alive, k])
