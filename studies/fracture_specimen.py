@@ -9,6 +9,10 @@ size h (mm; the MPM cell and the FE element edge) the study prints
 
 * the displacement of the pulled face at fracture initiation (the first point whose damage
   reaches 1) from both models and their difference;
+* pmpm's refinement (second table): the displacement at initiation and its change between
+  sizes, and the fracture energy dissipated by ``--end-time`` (the crack has then run through
+  the ligament: the force left is printed) over G_f times the ligament's area, which the
+  Hillerborg regularisation (l_c = h) should keep independent of h;
 * the force-displacement curves to initiation: the held face's reaction averaged over windows
   of ``--window`` seconds (the elastic waves of the sudden pull ring with a period of 2 L / c,
   about 40 us: the window averages them out the same way in both), its largest difference
@@ -97,7 +101,7 @@ def window_means(time_, force, window, until):
     return edges, np.array(means)
 
 
-def compare(h, window=1.0e-4, end_time=1.5e-3, sp=None):
+def compare(h, window=1.0e-4, end_time=2.2e-3, sp=None):
     """Both models at size ``h``: a dict of the figures the table prints."""
     sp = sp or fe_module().SPECIMEN
     a, b = mpm(h, end_time, sp), fe(h, end_time, sp)
@@ -108,12 +112,33 @@ def compare(h, window=1.0e-4, end_time=1.5e-3, sp=None):
     ta, fa = window_means(a["time"], a["force"], window, until)
     _, fb = window_means(b["time"], b["force"], window, until)
     peak = np.nanmax(np.abs(fb))
-    return {"h_mm": h * 1e3, "u_init_mpm_mm": ua * 1e3, "u_init_fe_mm": ub * 1e3,
+    r = a["result"]
+    ligament = sp["width"] - 2 * sp["radius"]
+    gf_area = sp["fracture_energy"] * ligament * sp["thickness"]
+    failed = r.frames["damage"][-1] >= 1.0
+    return {"h_mm": h * 1e3, "fracture_work_J": float(r.energies["fracture_work"][-1]),
+            "fracture_work_over_GfA": float(r.energies["fracture_work"][-1]) / gf_area,
+            "failed_points": int(failed.sum()),
+            "end_force_over_peak": float(abs(a["force"][-10:].mean())) / peak, "u_init_mpm_mm": ua * 1e3, "u_init_fe_mm": ub * 1e3,
             "u_init_diff": (ua - ub) / ub, "force_max_diff": float(np.nanmax(np.abs(fa - fb)) / peak),
             "force_peak_fe_kN": peak / 1e3, "force_peak_mpm_kN": float(np.nanmax(np.abs(fa))) / 1e3,
             "windows": len(ta), "wall_mpm_s": a["wall"], "wall_fe_s": b["wall"],
             "curve": {"u_mm": (sp["pull"] * ta * 1e3).tolist(), "mpm_kN": (fa / 1e3).tolist(),
                       "fe_kN": (fb / 1e3).tolist()}}
+
+
+def refinement_table(rows):
+    """pmpm's own refinement: initiation, its change from the previous size, the fracture
+    energy dissipated by the end (over G_f times the ligament's area) and the force left."""
+    lines = ["| h (mm) | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | force at the end / FE peak |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: |"]
+    prev = None
+    for r in rows:
+        change = "" if prev is None else f"{100 * (r['u_init_mpm_mm'] - prev) / prev:+.1f}%"
+        lines.append(f"| {r['h_mm']:.3g} | {r['u_init_mpm_mm']:.4f} | {change} | {r['fracture_work_J']:.3f} | "
+                     f"{r['fracture_work_over_GfA']:.3f} | {r['end_force_over_peak']:.3f} |")
+        prev = r["u_init_mpm_mm"]
+    return "\n".join(lines)
 
 
 def markdown_table(rows):
@@ -130,11 +155,12 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[10 / 3, 2.0, 1.0], help="cell / element sizes (mm)")
     ap.add_argument("--window", type=float, default=1.0e-4, help="force averaging window (s)")
+    ap.add_argument("--end-time", type=float, default=2.2e-3, help="pmpm's end time (s): past the separation")
     ap.add_argument("--curves", action="store_true", help="print the windowed force-displacement curves")
     args = ap.parse_args(argv)
     rows = []
     for size in args.sizes:
-        row = compare(size * 1e-3, args.window)
+        row = compare(size * 1e-3, args.window, args.end_time)
         rows.append(row)
         if args.curves:
             c = row["curve"]
@@ -142,6 +168,8 @@ def main(argv=None):
             for u, x, y in zip(c["u_mm"], c["mpm_kN"], c["fe_kN"]):
                 print(f"  {u:.3f}  {x:9.2f}  {y:9.2f}")
     print(markdown_table(rows))
+    print()
+    print(refinement_table(rows))
     print(json.dumps({"fracture_specimen": [{k: v for k, v in r.items() if k != "curve"} for r in rows]}))
 
 
