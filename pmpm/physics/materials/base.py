@@ -192,9 +192,11 @@ class Material:
         raise NotImplementedError(f"{self.name} has no tangent for the implicit integrator")
 
 
-def keep_work_in_joules(work, de, mat_ids, which):
+def keep_work_in_joules(work, de, mat_ids, which, damage=None):
     """Deflate the per-volume plastic work ``work`` of the points of material ``which`` (all
     when ``which`` < 0) by this step's volume ratio, before the step's plastic work is added.
+    With fracture (``damage`` given) the failed points are left alone: the fracture epilogue
+    freezes their plastic work in joules itself (pmpm.physics.materials.fracture._soften).
 
     The run counts ``plastic_work`` (J/m^3) times the particle's current volume, which the step
     has just scaled by 1 + tr(de) (pmpm.core.kernels.transfer; det of the step's in-plane
@@ -207,11 +209,13 @@ def keep_work_in_joules(work, de, mat_ids, which):
     volume the solver's internal work uses too.
     """
     scale = 1.0 / (1.0 + de[:, 0] + de[:, 1])
-    if which >= 0:
-        sel = mat_ids == which
-        work[sel] *= scale[sel]
-    else:
+    if which < 0 and damage is None:
         work *= scale
+        return
+    sel = np.ones(len(work), bool) if which < 0 else mat_ids == which
+    if damage is not None:
+        sel &= damage < 1.0
+    work[sel] *= scale[sel]
 
 
 class KinematicHardening(Material):
@@ -252,14 +256,23 @@ class KinematicHardening(Material):
         self.state_fields = {**type(self).state_fields, **fracture_option.FRACTURE_FIELDS}
         self.tensor_state_fields = (*type(self).tensor_state_fields, "effective_stress")
 
+    #: whether the update keeps V plastic_work in joules (keep_work_in_joules): in a run, whose
+    #: build tells every material the cell size (use_cell_size), the run counts per-volume
+    #: fields times the particles' current volumes; a lone point (the constitutive tests) has
+    #: no volume and keeps the per-volume identity d(U + w_p) = mean(sigma) . d_eps
+    work_in_joules = False
+
     def use_cell_size(self, h):
+        self.work_in_joules = True   # called by pmpm.build for every material of a run
         if self.fracture is not None and self.fracture["length"] is None:
             self.fracture_length = float(h)
 
     def update_stress(self, stress, de, state, mat_ids, which):
         """The material's plain kernel (:meth:`plastic_update`), between the fracture option's
         two passes when the scene names it (pmpm.physics.materials.fracture)."""
-        keep_work_in_joules(state["plastic_work"], de, mat_ids, which)
+        if self.work_in_joules:
+            keep_work_in_joules(state["plastic_work"], de, mat_ids, which,
+                                state["damage"] if self.fracture is not None else None)
         if self.fracture is None:
             self.plastic_update(stress, de, state, mat_ids, which)
             return

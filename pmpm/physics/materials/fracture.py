@@ -238,10 +238,10 @@ def _soften(p, phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, fwo
     # scaled by 1 + tr(de) (pmpm.core.kernels.transfer). An opening crack inflates a failed
     # point's volume by its opening strain, which would inflate the energy it already holds:
     # its plastic work is frozen in joules from failure (its dissipation since is fracture work,
-    # not counted twice: work0 was deflated by the step's volume ratio before the update,
-    # base.keep_work_in_joules) and its fracture work holds its joules plus this step's.
+    # not counted twice; base.keep_work_in_joules leaves failed points to this line) and its
+    # fracture work holds its joules plus this step's.
     inflate = 1.0 / (1.0 + de[p, 0] + de[p, 1])
-    work[p] = work0
+    work[p] = work0 * inflate
     w = 1.0
     if crack[p, 0] < crack[p, 1]:
         w = crack[p, 0] / crack[p, 1]
