@@ -54,7 +54,8 @@ def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
         "formulation": "plane_stress",
         "particles_per_cell": 2,
         "grid": {"origin": [-margin * h, -margin * h], "cell_size": h,
-                 "cells": [int(math.ceil(sp["length"] / h - 1e-9)) + 2 * margin,
+                 # the pulled face moves by pull x end_time: room for it beyond the margin
+                 "cells": [int(math.ceil((sp["length"] + sp["pull"] * end_time) / h - 1e-9)) + 2 * margin,
                            int(math.ceil(sp["width"] / h - 1e-9)) + 2 * margin]},
         "materials": {"steel": {
             "type": "bilinear_vonmises", "E": sp["E"], "nu": sp["nu"], "density": sp["density"],
