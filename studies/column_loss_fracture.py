@@ -10,8 +10,8 @@ fracture option on the steel) at cell size ``--cell``, one run on one rank throu
   arrests (studies.column_loss.summarise: the point's speed falls back below 5% of its peak
   and the drop stays within 1.5 times the peak);
 - the first fracture per member (body) and its time (the run summary's ``first_fracture``),
-  the number of failed points at the end and the failed points' distance from the removed
-  column's axis (the connection region);
+  the number of failed points at the end, their distance from the removed column's axis and
+  the box (x, y at the start) they lie in;
 - the fracture energy dissipated (J) and the wall time;
 
 then the smallest factor at which the frame no longer arrests (the sequence stops there unless
@@ -61,10 +61,13 @@ def run_factor(h, factor, eta, fracture_energy, end_time=None):
     failed = r.frames["damage"][-1] >= 1.0
     x0 = r.frames["x"][0][failed]
     dist = np.abs(x0[:, 0] - REMOVED_X) if failed.any() else np.array([math.nan])
+    where = x0 if failed.any() else np.full((1, 2), math.nan)
     return {"factor": factor, "peak_uy": s["peak_uy"], "arrested": s["arrested"],
             "first_fracture": {k: float(v) for k, v in r.summary.get("first_fracture", {}).items()},
             "failed_points": int(failed.sum()), "failed_nearest_m": float(np.nanmin(dist)),
             "failed_farthest_m": float(np.nanmax(dist)),
+            "failed_x_m": [float(np.nanmin(where[:, 0])), float(np.nanmax(where[:, 0]))],
+            "failed_y_m": [float(np.nanmin(where[:, 1])), float(np.nanmax(where[:, 1]))],
             "fracture_work_J": float(r.energies["fracture_work"][-1]), "wall_s": wall}
 
 
