@@ -37,7 +37,6 @@ from studies import verification_models
 
 __all__ = ["fe_module", "scene", "mpm", "fe", "compare", "window_means", "main"]
 
-PULL_FACE_LAYER = 0.5   # the held/pulled particles: the outermost layer (docs/scene.md)
 
 
 def fe_module():
