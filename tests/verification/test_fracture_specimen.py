@@ -20,6 +20,9 @@ What is asserted, and where the bounds come from:
   the net-section strain by up to h / ligament and the strain concentration at the root, which
   the damage integrates, by as much again. At 10/3 mm the root is resolved by one particle
   layer: only that both models initiate, at a notch;
+  Caveat (docs/fracture.md): the study's 1 mm run shows pmpm's initiation moving away from the
+  FE model's under refinement (the two cross near 2 mm), so this check guards the 2 mm value
+  against a change, it does not show convergence; the force check does converge (5%, 3%, 1%);
 - both models initiate at a notch's surface, within a cell of it (1.5 cells for pmpm's failed
   particles, whose positions are the start's): the strain is highest at the notch, where the
   free surface's triaxiality is 1/3 (the coarse FE mesh's first point is 4 mm off the root,
