@@ -246,6 +246,10 @@ class Result:
         The structural tables of the run's ``[[output.section]]`` cuts (``time``,
         ``N``, ``V``, ``M``) and reactions (``time``, ``Rx``, ``Ry``, ``M``), by name;
         empty when the scene asks for none (docs/structural_results.md).
+    fractures : dict of str to table
+        With ductile fracture and structural tables: each body's (member's) count of failed
+        points over time (``time``, ``failed``), by body name;
+        :func:`pmpm.results.recorder.first_fracture` gives each member's first fracture.
     series : dict of str to table
         Every series group (:meth:`pmpm.io.OutputFile.add_series`) other than energies.
 
@@ -262,6 +266,7 @@ class Result:
         structural = structural or {}
         self.sections = {n: _table(t, pandas) for n, t in structural.get("sections", {}).items()}
         self.reactions = {n: _table(t, pandas) for n, t in structural.get("reactions", {}).items()}
+        self.fractures = {n: _table(t, pandas) for n, t in structural.get("fracture", {}).items()}
         self.path, self.scene, self.summary = path, scene, summary
         self.stopped = stopped
         self._pandas = pandas
@@ -382,8 +387,9 @@ def load_results(path, dataframes=None):
     series = {g: _table(read_series(path, g), pandas) for g in groups}
     energies = series.pop("energies")
     from pmpm.results.post import read_tables
-    from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS
-    order = {"sections": SECTION_COLUMNS, "reactions": REACTION_COLUMNS}  # HDF5 lists by name
+    from pmpm.results.recorder import FRACTURE_COLUMNS, REACTION_COLUMNS, SECTION_COLUMNS
+    order = {"sections": SECTION_COLUMNS, "reactions": REACTION_COLUMNS,  # HDF5 lists by name
+             "fracture": FRACTURE_COLUMNS}
     structural = {kind: {n: {c: t[c] for c in order[kind] if c in t} for n, t in tables.items()}
                   for kind, tables in read_tables(path).items()}
     return Result(_history_tables(times, tracks, columns, pandas), ids, energies, frame_times[complete],

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 
 from pmpm.io import ownership
-from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS, read_tables
+from pmpm.results.recorder import REACTION_COLUMNS, SECTION_COLUMNS, first_fracture, read_tables
 from pmpm.io.plot import scene_stem
 from pmpm.results import plots
 from pmpm.results.capacity import write_capacity
@@ -35,6 +35,14 @@ def write_csv(h5_path, outdir, tables=None):
                 np.savetxt(path, np.column_stack([table[c] for c in columns]), delimiter=",",
                            header=header, comments="", fmt="%.9g")
                 paths.append(path)
+        if tables.get("fracture"):
+            # the first fracture of each member (body) that fractured, earliest first
+            path = ownership.claim(os.path.join(outdir, f"{stem}_first_fracture.csv"))
+            with open(path, "w") as f:
+                f.write("member,t\n")
+                for name, t in first_fracture(tables["fracture"]).items():
+                    f.write(f"{name},{t:.9g}\n")
+            paths.append(path)
     return paths
 
 

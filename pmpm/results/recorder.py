@@ -1,21 +1,28 @@
-"""Time histories of the section cuts and support reactions a scene asks for.
+"""Time histories of the section cuts and support reactions a scene asks for, and of the
+failed points of each body (member) in a run with ductile fracture.
 
 Sampled at the history times (``output.history_interval``) with ONE allreduce per sample for
 all cuts and reactions together; a scene without cuts and reactions has no recorder at all.
 Rows are buffered and written with the other histories (``/sections/<name>`` and
-``/reactions/<name>`` in the HDF5 file, columns with SI units as attributes).
+``/reactions/<name>`` in the HDF5 file, columns with SI units as attributes). With ductile
+fracture (the ``fracture`` effect, pmpm.physics.fracture_record) each body's count of failed
+points is sampled in the same reduction into ``/fracture/<body>`` (``time``, ``failed``): a
+frame's members are its bodies, so :func:`first_fracture` gives each member's first fracture at
+the history's resolution (the run summary's ``first_fracture`` has the step's).
 """
 import logging
 
 import h5py
 import numpy as np
 
-__all__ = ["StructuralRecorder", "read_tables", "SECTION_COLUMNS", "REACTION_COLUMNS", "UNITS"]
+__all__ = ["StructuralRecorder", "read_tables", "first_fracture", "SECTION_COLUMNS", "REACTION_COLUMNS",
+           "FRACTURE_COLUMNS", "UNITS"]
 logger = logging.getLogger(__name__)
 
 SECTION_COLUMNS = ("time", "N", "V", "M")
 REACTION_COLUMNS = ("time", "Rx", "Ry", "M")
-UNITS = {"time": "s", "N": "N", "V": "N", "M": "N m", "Rx": "N", "Ry": "N"}
+FRACTURE_COLUMNS = ("time", "failed")
+UNITS = {"time": "s", "N": "N", "V": "N", "M": "N m", "Rx": "N", "Ry": "N", "failed": "1"}
 
 
 class StructuralRecorder:
@@ -34,6 +41,8 @@ class StructuralRecorder:
         self.cuts = sections.cuts if sections is not None else []
         self.reactions = solver.effect("reactions")
         self.reaction_names = self.reactions.names if self.reactions is not None else []
+        fracture = solver.effect("fracture")
+        self.fracture_bodies = list(fracture.body_names) if fracture is not None else []
         self._phi, self._phi_of = None, None
         # the cuts' band particles by id (all ranks), found once: _band_table
         self._band = self._band_table() if self.cuts else None
@@ -89,7 +98,21 @@ class StructuralRecorder:
         local = [self.local_sections()]
         if self.reactions is not None:
             local.append(self.reactions.sums.copy())
+        if self.fracture_bodies:
+            local.append(self.local_failed())
         return np.concatenate(local).ravel()
+
+    def local_failed(self):
+        """(n_bodies, 3): this rank's count of failed points (damage 1) per body, in the first
+        column (rows of three, as the other figures of the reduction)."""
+        p = self.solver.particles
+        out = np.zeros((len(self.fracture_bodies), 3))
+        damage = p.fields.get("damage")
+        if damage is not None and p.n:
+            failed = damage[:p.n] >= 1.0
+            body = p["body"][:p.n][failed]
+            out[:, 0] = np.bincount(body[body >= 0], minlength=len(self.fracture_bodies))[:len(self.fracture_bodies)]
+        return out
 
     def sample(self, summed=None):
         """Record one row at the solver's time; returns (sections, reactions) arrays.
@@ -100,9 +123,11 @@ class StructuralRecorder:
             summed = s.decomp.allreduce_sum(self.local_rows())
         total = np.asarray(summed).reshape(-1, 3)
         sections = total[:nc]
-        reactions = (self.reactions.take(s.t, None, summed=total[nc:])
+        nr = len(self.reaction_names)
+        reactions = (self.reactions.take(s.t, None, summed=total[nc:nc + nr])
                      if self.reactions is not None else np.zeros((0, 3)))
-        self.rows.append((s.t, sections, reactions))
+        failed = total[nc + nr:nc + nr + len(self.fracture_bodies), 0].copy()
+        self.rows.append((s.t, sections, reactions, failed))
         return sections, reactions
 
     def attributes(self):
@@ -113,6 +138,8 @@ class StructuralRecorder:
                                            "width": cut.width, **(cut.properties or {})}
         for k, name in enumerate(self.reaction_names):
             out[f"reactions/{name}"] = {"moment_about": self.reactions.points[k]}
+        for name in self.fracture_bodies:
+            out[f"fracture/{name}"] = {"body": name}
         return out
 
     def drain(self):
@@ -122,18 +149,21 @@ class StructuralRecorder:
         t = np.array([r[0] for r in self.rows])
         sec = np.array([r[1] for r in self.rows]).reshape(len(t), -1, 3)
         rea = np.array([r[2] for r in self.rows]).reshape(len(t), -1, 3)
+        failed = np.array([r[3] for r in self.rows]).reshape(len(t), -1)
         self.rows = []
         out = {}
         for k, cut in enumerate(self.cuts):
             out[f"sections/{cut.name}"] = dict(zip(SECTION_COLUMNS, (t, *sec[:, k].T)))
         for k, name in enumerate(self.reaction_names):
             out[f"reactions/{name}"] = dict(zip(REACTION_COLUMNS, (t, *rea[:, k].T)))
+        for k, name in enumerate(self.fracture_bodies):
+            out[f"fracture/{name}"] = {"time": t, "failed": failed[:, k]}
         return out
 
 
 def read_tables(h5_path):
-    """{"sections": {name: {column: array, "attrs": dict}}, "reactions": {...}}."""
-    out = {"sections": {}, "reactions": {}}
+    """{"sections": {name: {column: array, "attrs": dict}}, "reactions": {...}, "fracture": {...}}."""
+    out = {"sections": {}, "reactions": {}, "fracture": {}}
     with h5py.File(h5_path, "r") as f:
         for group in out:
             for name, g in f.get(group, {}).items():
@@ -141,3 +171,15 @@ def read_tables(h5_path):
                 table["attrs"] = {k: v for k, v in g.attrs.items()}
                 out[group][name] = table
     return out
+
+
+def first_fracture(fracture_tables):
+    """{body (member) name: the first sampled time at which it has a failed point} from the
+    ``fracture`` tables ({name: {"time", "failed"}}), earliest first; members that never
+    fracture are left out."""
+    first = {}
+    for name, table in fracture_tables.items():
+        failed = np.asarray(table["failed"]) > 0
+        if failed.any():
+            first[name] = float(np.asarray(table["time"])[np.argmax(failed)])
+    return dict(sorted(first.items(), key=lambda kv: kv[1]))

@@ -9,6 +9,8 @@ that did not migrate with its particle, or a rank's first fracture left out, is 
 difference.
 
 Run under ``mpirun -n K python -m pytest tests/mpi/test_fracture_mpi.py`` (or as a script).
+With a reaction recorded, the structural tables' failed points per body (summed over the ranks
+in the recorder's one reduction) equal the serial counts.
 Planted bug: FractureRecord.summary without its allgather (each rank its own first fractures)
 -> on 2 ranks rank 0 does not hold the weak band and the run's summary misses it: fails.
 """
@@ -30,12 +32,15 @@ RTOL = 1e-10
 def _run(c):
     sc = bar_scene(20)
     sc["output"]["fields"] = ["x", "damage"]
+    sc["boundary"][0]["reaction"] = True   # structural tables: each body's failed points, reduced
     r = run(sc, dataframes=False, comm=c)
     if c.Get_rank() != 0:
         return None
     e = r.energies
+    failed = np.concatenate([np.asarray(r.fractures[b]["failed"]) for b in sorted(r.fractures)])
     return {"fracture_work": np.asarray(e["fracture_work"]), "numerical_loss": np.asarray(e["numerical_loss"]),
-            "damage": np.asarray(r.frames["damage"][-1]), "first": np.array([r.summary["first_fracture"]["weak"]])}
+            "damage": np.asarray(r.frames["damage"][-1]), "first": np.array([r.summary["first_fracture"]["weak"]]),
+            "failed": failed}
 
 
 def test_fracture_on_several_ranks_gives_the_serial_answer():
@@ -43,6 +48,9 @@ def test_fracture_on_several_ranks_gives_the_serial_answer():
     ok, report = True, ""
     if comm.rank == 0:
         ref = _run(MPI.COMM_SELF)
+        # the failed points per body (the structural tables' sum over the ranks): the same counts
+        if par["failed"].shape != ref["failed"].shape or not np.array_equal(par["failed"], ref["failed"]):
+            ok, report = False, report + " failed points per body differ"
         for k in ("fracture_work", "damage", "first"):
             err = np.abs(par[k] - ref[k]).max() / max(np.abs(ref[k]).max(), 1e-300)
             if not err <= RTOL:

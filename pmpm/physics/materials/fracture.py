@@ -238,7 +238,8 @@ def _soften(p, phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, fwo
     # scaled by 1 + tr(de) (pmpm.core.kernels.transfer). An opening crack inflates a failed
     # point's volume by its opening strain, which would inflate the energy it already holds:
     # its plastic work is frozen in joules from failure (its dissipation since is fracture work,
-    # not counted twice) and its fracture work holds its joules plus this step's.
+    # not counted twice; base.keep_work_in_joules leaves failed points to this line) and its
+    # fracture work holds its joules plus this step's.
     inflate = 1.0 / (1.0 + de[p, 0] + de[p, 1])
     work[p] = work0 * inflate
     w = 1.0

@@ -1,0 +1,177 @@
+"""The round-notched steel plate pulled to ductile fracture initiation: pmpm against an
+independent finite-element model of the same specimen, material and locus (issue 39).
+
+The specimen and the FE model are tests/verification/notched_specimen_fe_model.py (NumPy only,
+4-node quadrilaterals, its own plane-stress return mapping and damage; nothing from pmpm). The
+same specimen is built here as a pmpm scene (:func:`scene`: the plate as a polygon whose arcs
+have 64 chords, the supports on the body's faces, the held face's reaction recorded). For each
+size h (mm; the MPM cell and the FE element edge) the study prints
+
+* the displacement of the pulled face at fracture initiation (the first point whose damage
+  reaches 1) from both models and their difference;
+* pmpm's refinement (second table): the displacement at initiation and its change between
+  sizes, and the fracture energy dissipated by ``--end-time`` (the crack has then run through
+  the ligament: the force left is printed) over G_f times the ligament's area, which the
+  Hillerborg regularisation (l_c = h) should keep independent of h;
+* the force-displacement curves to initiation: the held face's reaction averaged over windows
+  of ``--window`` seconds (the elastic waves of the sudden pull ring with a period of 2 L / c,
+  about 40 us: the window averages them out the same way in both), its largest difference
+  over the windows up to the earlier initiation, relative to the FE model's largest force;
+
+then one JSON line. Run::
+
+    python -m studies.fracture_specimen --sizes 3.333 2 1
+
+(the 1 mm MPM run takes a few minutes on this machine; run it under ``nice -n 10``). Nothing
+is written. tests/verification/test_fracture_specimen.py runs the two coarsest sizes in CI.
+"""
+import argparse
+import json
+import math
+import time
+
+import numpy as np
+
+from pmpm.api import run as pmpm_run
+from studies import verification_models
+
+__all__ = ["fe_module", "scene", "mpm", "fe", "compare", "window_means", "main"]
+
+
+
+def fe_module():
+    """tests/verification/notched_specimen_fe_model.py."""
+    return verification_models.load("notched_specimen_fe_model")
+
+
+def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
+    """The specimen as a pmpm scene (a TOML dict) at cell size ``h`` (m)."""
+    sp = sp or fe_module().SPECIMEN
+    margin = 2
+    return {
+        "title": f"round-notched plate to fracture initiation, h = {h * 1e3:.3g} mm",
+        "formulation": "plane_stress",
+        "particles_per_cell": 2,
+        "grid": {"origin": [-margin * h, -margin * h], "cell_size": h,
+                 # the pulled face moves by pull x end_time: room for it beyond the margin
+                 "cells": [int(math.ceil((sp["length"] + sp["pull"] * end_time) / h - 1e-9)) + 2 * margin,
+                           int(math.ceil(sp["width"] / h - 1e-9)) + 2 * margin]},
+        "materials": {"steel": {
+            "type": "bilinear_vonmises", "E": sp["E"], "nu": sp["nu"], "density": sp["density"],
+            "yield_stress": sp["yield_stress"], "hardening": sp["hardening"],
+            "fracture": {"model": "void_growth", "eta": sp["eta"], "fracture_energy": sp["fracture_energy"]}}},
+        "bodies": [{"name": "plate", "shape": "polygon", "material": "steel", "thickness": sp["thickness"],
+                    "vertices": fe_module().polygon(sp)}],
+        "boundary": [
+            {"name": "held", "type": "fixed", "body": "plate", "face": "left", "reaction": True},
+            {"name": "pulled", "type": "velocity", "velocity": [sp["pull"], 0.0], "body": "plate", "face": "right"}],
+        "solver": {"end_time": end_time, "cfl": 0.5},
+        "output": {"interval": end_time, "history_interval": history_interval, "fields": ["x", "damage"]},
+    }
+
+
+def mpm(h, end_time=2.0e-3, sp=None, overrides=None):
+    """pmpm's run: {time, force (mean Rx of the held face per sample), initiation, wall}."""
+    t0 = time.perf_counter()
+    r = pmpm_run(scene(h, end_time, sp), overrides=overrides, dataframes=False)
+    wall = time.perf_counter() - t0
+    reaction = r.reactions["held"]
+    first = r.summary.get("first_fracture", {}).get("plate")
+    return {"time": np.asarray(reaction["time"]), "force": np.asarray(reaction["Rx"]),
+            "initiation": None if first is None else float(first), "wall": wall, "result": r}
+
+
+def fe(h, end_time=2.0e-3, sp=None):
+    """The FE model's run (same keys as :func:`mpm`)."""
+    model = fe_module()
+    t0 = time.perf_counter()
+    r = model.run(h, sp or model.SPECIMEN, end_time=end_time)
+    r["wall"] = time.perf_counter() - t0
+    return r
+
+
+def window_means(time_, force, window, until):
+    """Mean force over consecutive windows of ``window`` s up to ``until`` (the samples are
+    means over equal sampling intervals ending at ``time_``): (window ends, means)."""
+    edges = np.arange(window, until + 1e-12, window)
+    means = []
+    for hi in edges:
+        sel = (time_ > hi - window + 1e-12) & (time_ <= hi + 1e-12)
+        means.append(force[sel].mean() if sel.any() else np.nan)
+    return edges, np.array(means)
+
+
+def compare(h, window=1.0e-4, end_time=2.2e-3, sp=None):
+    """Both models at size ``h``: a dict of the figures the table prints."""
+    sp = sp or fe_module().SPECIMEN
+    a, b = mpm(h, end_time, sp), fe(h, end_time, sp)
+    ua = sp["pull"] * a["initiation"] if a["initiation"] else math.nan
+    ub = sp["pull"] * b["initiation"] if b["initiation"] else math.nan
+    until = min(x for x in (a["initiation"], b["initiation"], end_time) if x)
+    until = window * math.floor(until / window)
+    ta, fa = window_means(a["time"], a["force"], window, until)
+    _, fb = window_means(b["time"], b["force"], window, until)
+    peak = np.nanmax(np.abs(fb))
+    r = a["result"]
+    ligament = sp["width"] - 2 * sp["radius"]
+    gf_area = sp["fracture_energy"] * ligament * sp["thickness"]
+    failed = r.frames["damage"][-1] >= 1.0
+    return {"h_mm": h * 1e3, "fracture_work_J": float(r.energies["fracture_work"][-1]),
+            "fracture_work_over_GfA": float(r.energies["fracture_work"][-1]) / gf_area,
+            "failed_points": int(failed.sum()),
+            "end_force_over_peak": float(abs(a["force"][-10:].mean())) / peak, "u_init_mpm_mm": ua * 1e3, "u_init_fe_mm": ub * 1e3,
+            "u_init_diff": (ua - ub) / ub, "force_max_diff": float(np.nanmax(np.abs(fa - fb)) / peak),
+            "force_peak_fe_kN": peak / 1e3, "force_peak_mpm_kN": float(np.nanmax(np.abs(fa))) / 1e3,
+            "windows": len(ta), "wall_mpm_s": a["wall"], "wall_fe_s": b["wall"],
+            "curve": {"u_mm": (sp["pull"] * ta * 1e3).tolist(), "mpm_kN": (fa / 1e3).tolist(),
+                      "fe_kN": (fb / 1e3).tolist()}}
+
+
+def refinement_table(rows):
+    """pmpm's own refinement: initiation, its change from the previous size, the fracture
+    energy dissipated by the end (over G_f times the ligament's area) and the force left."""
+    lines = ["| h (mm) | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | force at the end / FE peak |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: |"]
+    prev = None
+    for r in rows:
+        change = "" if prev is None else f"{100 * (r['u_init_mpm_mm'] - prev) / prev:+.1f}%"
+        lines.append(f"| {r['h_mm']:.3g} | {r['u_init_mpm_mm']:.4f} | {change} | {r['fracture_work_J']:.3f} | "
+                     f"{r['fracture_work_over_GfA']:.3f} | {r['end_force_over_peak']:.3f} |")
+        prev = r["u_init_mpm_mm"]
+    return "\n".join(lines)
+
+
+def markdown_table(rows):
+    lines = ["| h (mm) | u at initiation, pmpm (mm) | FE (mm) | difference | force, largest difference / FE peak | FE peak (kN) | wall pmpm / FE (s) |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {r['h_mm']:.3g} | {r['u_init_mpm_mm']:.4f} | {r['u_init_fe_mm']:.4f} | "
+                     f"{100 * r['u_init_diff']:+.1f}% | {100 * r['force_max_diff']:.1f}% | "
+                     f"{r['force_peak_fe_kN']:.1f} | {r['wall_mpm_s']:.0f} / {r['wall_fe_s']:.0f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=float, nargs="+", default=[10 / 3, 2.0, 1.0], help="cell / element sizes (mm)")
+    ap.add_argument("--window", type=float, default=1.0e-4, help="force averaging window (s)")
+    ap.add_argument("--end-time", type=float, default=2.2e-3, help="pmpm's end time (s): past the separation")
+    ap.add_argument("--curves", action="store_true", help="print the windowed force-displacement curves")
+    args = ap.parse_args(argv)
+    rows = []
+    for size in args.sizes:
+        row = compare(size * 1e-3, args.window, args.end_time)
+        rows.append(row)
+        if args.curves:
+            c = row["curve"]
+            print(f"h = {size:g} mm: u (mm), pmpm, FE (kN)")
+            for u, x, y in zip(c["u_mm"], c["mpm_kN"], c["fe_kN"]):
+                print(f"  {u:.3f}  {x:9.2f}  {y:9.2f}")
+    print(markdown_table(rows))
+    print()
+    print(refinement_table(rows))
+    print(json.dumps({"fracture_specimen": [{k: v for k, v in r.items() if k != "curve"} for r in rows]}))
+
+
+if __name__ == "__main__":
+    main()
