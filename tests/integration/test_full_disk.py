@@ -142,8 +142,8 @@ def test_expand_onto_a_full_disk_keeps_the_earlier_file(disk):
 
 @pytest.mark.parametrize("limit", [200_000, 330_000])
 def test_a_run_past_the_file_size_limit_says_one_line(tmp_path, limit):
-    # the bar's results file grows to 366 kB; the limits cut it after its first frame (which
-    # allocates the tables' first chunks, 241 kB) and after its fourth
+    # the bar's results file grows to 292 kB (single-precision frames); the limits cut it after
+    # its first frame (which allocates the tables' first chunks, about 240 kB) and near its end
     (tmp_path / "bar.toml").write_text(BAR.format(max_steps=""))
     code = ("import resource, sys\n"
             "from mpi4py import MPI  # MPI_Init first: PMIx itself needs larger files\n"

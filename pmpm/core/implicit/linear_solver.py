@@ -156,7 +156,8 @@ class LinearSolver:
         self.iterations = 0
 
     def _has_mumps(self):
-        return self.PETSc.Mat.SolverType.MUMPS in dir(self.PETSc.Mat.SolverType) or True
+        """Whether the PETSc library was configured with MUMPS (Debian's is)."""
+        return bool(self.PETSc.Sys.hasExternalPackage("mumps"))
 
     def check_unused(self):
         """ConfigError for the first option PETSc did not read (a misspelt name, or one that
