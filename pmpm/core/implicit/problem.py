@@ -53,8 +53,16 @@ class GridProblem:
         self.fext_start = fext_start
         self.geometry = (w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
         p = s.particles
-        self.x = p["x"]
-        self.vol = p["vol"]
+        # the step's reference configuration, copied: the commit moves the particles and pushes
+        # their volumes forward in place before the terms' last evaluations of the converged
+        # increment (the supports' work, Rayleigh's dissipation, the reactions), which must see
+        # the positions the window was built for. A particle's stencil at its end position can
+        # reach a node column past its rank's window (a B-spline reaches one node below its cell
+        # and two above, the ghost width is two: a particle that crosses the upper slab boundary
+        # in the step has no spare column), and the kernels do not check bounds (issue 37: the
+        # Northridge run's heap corruption).
+        self.x = p["x"].copy()
+        self.vol = p["vol"].copy()
         self.stress0 = p["stress"].copy()
         self.state0 = [{name: (p[name].copy() if p.fields.get(name) is not None else None)
                         for name in m.state_fields} for m in s.materials]
