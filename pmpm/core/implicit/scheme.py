@@ -149,6 +149,7 @@ class ImplicitNewmark:
             s.particles.add_field(ACCELERATION, (2,))
             if self.dynamic and self.options.get("initial_static"):
                 self.initial_equilibrium(s)
+                self.migrate_between_substeps(s)   # (the static stage moved the particles)
             if self.dynamic:
                 self.start_accelerations(s)
 
