@@ -22,6 +22,27 @@ __all__ = ["GridProblem"]
 logger = logging.getLogger(__name__)
 
 
+def _check_stencils_in_window(s, x):
+    """RuntimeError on every rank unless every particle's stencil at ``x`` lies in its rank's
+    grid window along the slab axis (nodes c - reach + 1 .. c + reach of its cell c, clipped to
+    the grid: pmpm.core.grid.GridWindow). The step's kernels index the window without bounds
+    checks, so a particle its rank should have handed on (a missed migration) would make them
+    write past the nodal arrays: heap corruption far from the cause (issue 37). Collective."""
+    w, g, axis = s.window, s.grid, s.axis
+    inside = True
+    if len(x) and w.reach is not None:
+        c = np.floor((x[:, axis] - g.origin[axis]) * g.inv_h)
+        n = g.cells[axis]
+        lo = np.clip(c - w.reach + 1, 0, n)
+        hi = np.clip(c + w.reach, 0, n)
+        first = w.lo[axis]
+        inside = bool(np.all((lo >= first) & (hi < first + w.shape[axis])))
+    outside = s.decomp.allreduce_sum(0 if inside else 1)
+    if outside:
+        raise RuntimeError(f"implicit step: a particle's stencil reaches past its rank's grid window on {int(outside)} "
+                           f"rank(s) (a particle was not handed to its slab's owner before the step)")
+
+
 class GridProblem:
     """The equations of one step of length ``rule.dt`` (``rule`` None: statics).
 
@@ -53,8 +74,17 @@ class GridProblem:
         self.fext_start = fext_start
         self.geometry = (w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
         p = s.particles
-        self.x = p["x"]
-        self.vol = p["vol"]
+        # the step's reference configuration, copied: the commit moves the particles and pushes
+        # their volumes forward in place before the terms' last evaluations of the converged
+        # increment (the supports' work, Rayleigh's dissipation, the reactions), which must see
+        # the positions the window was built for. A particle's stencil at its end position can
+        # reach a node column past its rank's window (a B-spline reaches one node below its cell
+        # and two above, the ghost width is two: a particle that crosses the upper slab boundary
+        # in the step has no spare column), and the kernels do not check bounds (issue 37: the
+        # Northridge run's heap corruption).
+        self.x = p["x"].copy()
+        self.vol = p["vol"].copy()
+        _check_stencils_in_window(s, self.x)
         self.stress0 = p["stress"].copy()
         self.state0 = [{name: (p[name].copy() if p.fields.get(name) is not None else None)
                         for name in m.state_fields} for m in s.materials]

@@ -109,6 +109,8 @@ class ImplicitNewmark:
                                 dt * self.fraction)
                 continue
             done += h
+            if done < dt * (1.0 - 1e-12):
+                self.migrate_between_substeps(s)
             self.converged_in_row += 1
             if self.fraction < 1.0 and self.converged_in_row >= GROW_AFTER:
                 self.fraction = min(1.0, 2.0 * self.fraction)
@@ -119,6 +121,22 @@ class ImplicitNewmark:
                         "%d linear iterations, %d halvings", st["steps"], st["newton_iterations"],
                         st["newton_iterations"] / max(st["steps"], 1), st["residual_evaluations"],
                         st["linear_iterations"], st["halvings"])
+
+    @staticmethod
+    def migrate_between_substeps(s):
+        """Particles that crossed their slab's boundary in a sub-step go to their new owner
+        before the next sub-step of the same scene step (the solver migrates only at the step's
+        end): the step's kernels index the rank's window from the particles' start positions,
+        and a stencil has no spare node column above its slab (a cubic B-spline reaches two
+        nodes above its cell, the ghost width is two), so a particle that crossed the upper
+        boundary would make them read and write one column past the window (collective)."""
+        if s.decomp.size == 1:
+            return
+        p, g, d = s.particles, s.grid, s.decomp
+        c0, c1 = d.owned
+        _, leaving, _ = K.count_strays(p["x"], p["vol"], g.origin, g.inv_h, g.cells[0], g.cells[1], s.axis,
+                                       c0, min(c1, g.cells[s.axis]))
+        s.migrate(int(d.allreduce_sum(leaving)))
 
     def _start(self, s):
         """First call: the PETSc solver, the options, and Newmark's start accelerations."""
@@ -131,6 +149,7 @@ class ImplicitNewmark:
             s.particles.add_field(ACCELERATION, (2,))
             if self.dynamic and self.options.get("initial_static"):
                 self.initial_equilibrium(s)
+                self.migrate_between_substeps(s)   # (the static stage moved the particles)
             if self.dynamic:
                 self.start_accelerations(s)
 
@@ -146,15 +165,18 @@ class ImplicitNewmark:
         _scatter_point_forces(s, t_load, geometry)
         s.exchange_halo(slice(0, 7))
 
-    def external_forces(self, s, t):
+    def external_forces(self, s, t, x=None):
         """Halo-summed external nodal forces at time ``t`` (weight and point loads), in a
-        window array of their own (HHT-alpha needs the step's start forces too)."""
+        window array of their own (HHT-alpha needs the step's start forces too), from the
+        particles at ``x`` (default their current positions; after the commit moved them, the
+        step's start positions ``GridProblem.x``)."""
         p, w, g = s.particles, s.window, s.grid
+        x = p["x"] if x is None else x
         T = np.zeros(w.G.shape)
         geometry = (T, w.ox, w.oy, g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape)
         if s.gravity is not None:
-            IK.scatter_inertia_and_gravity(p["x"], p["m"], None, s.gravity, *geometry)
-        _scatter_point_forces(s, t, geometry)
+            IK.scatter_inertia_and_gravity(x, p["m"], None, s.gravity, *geometry)
+        _scatter_point_forces(s, t, geometry, x)
         F = np.ascontiguousarray(T[..., FORCE])
         s.decomp.sum_halo(F)
         return F
@@ -301,7 +323,8 @@ class ImplicitNewmark:
         ground's; the start's damping forces at the supports are left out of the start value);
         the moving supports' work is :meth:`_support_work`'s there (fixed ones do none)."""
         held = problem.dofs.held
-        start = -(problem.fint_start + self.external_forces(s, t0))
+        # (the particles have moved: the start's forces from the step's start positions)
+        start = -(problem.fint_start + self.external_forces(s, t0, problem.x))
         if a_new is None:
             end = -R
         else:
@@ -350,11 +373,12 @@ class ImplicitNewmark:
                 s.external_work += 0.5 * K.point_load_work(idx, s._dx, load_id, load_w, load_vec)
 
 
-def _scatter_point_forces(s, t, geometry):
+def _scatter_point_forces(s, t, geometry, x=None):
     """The force sets of the ``loads`` effect at time ``t`` onto the window array of
-    ``geometry`` (none without the effect or without force sets)."""
+    ``geometry`` (none without the effect or without force sets), from the particles at ``x``
+    (default their current positions)."""
     loads = s.effect("loads")
     point = loads.point_forces(s.particles, t) if loads is not None else None
     if point is not None:
         idx, load_id, load_w, load_vec = point
-        K.scatter_point_loads(idx, s.particles["x"], load_id, load_w, load_vec, *geometry)
+        K.scatter_point_loads(idx, s.particles["x"] if x is None else x, load_id, load_w, load_vec, *geometry)
