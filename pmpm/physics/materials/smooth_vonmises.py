@@ -231,13 +231,12 @@ def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
 
 
 @nb.njit(cache=True, inline="always")
-def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
-                kint, xfloor, c, h, phi_quiet2):
-    """One particle's increment in sub-steps of at most ``h`` (any increment, any N)."""
-    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
-    nsub = 1
-    if big > h:
-        nsub = int(math.ceil(big / h))
+def _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
+               phi_quiet2):
+    """Particle p's increment ``de[p]`` in ``nsub`` equal RK2 sub-steps from its stored state.
+
+    Returns the end state and the increment's plastic changes, (sxx, syy, sxy, szz, bxx, byy,
+    bxy, bzz, dpxx, dpyy, dpxy, d_eps_p_eq, d_work, plastic), without storing them."""
     inv = 1.0 / nsub
     dexx = de[p, 0] * inv
     deyy = de[p, 1] * inv
@@ -297,15 +296,75 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
         pyy += m[9]
         pxy += m[10]
         eq += abs(m[11])
-    stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = sxx, syy, sxy, szz
-    if plastic:  # elastic points leave their state untouched (saves the stores)
-        back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
+    return sxx, syy, sxy, szz, bxx, byy, bxy, bzz, pxx, pyy, pxy, eq, w, plastic
+
+
+@nb.njit(cache=True, inline="always")
+def _store(p, r, stress, back, eps_p, eps_eq, work):
+    """Store an ``_integrate`` result ``r`` as particle p's state."""
+    stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = r[0], r[1], r[2], r[3]
+    if r[13]:  # elastic points leave their state untouched (saves the stores)
+        back[p, 0], back[p, 1], back[p, 2], back[p, 3] = r[4], r[5], r[6], r[7]
         if eps_p is not None:  # kept only when output (diagnostic_fields)
-            eps_p[p, 0] += pxx
-            eps_p[p, 1] += pyy
-            eps_p[p, 2] += pxy
-        eps_eq[p] += eq
-        work[p] += w
+            eps_p[p, 0] += r[8]
+            eps_p[p, 1] += r[9]
+            eps_p[p, 2] += r[10]
+        eps_eq[p] += r[11]
+        work[p] += r[12]
+
+
+@nb.njit(cache=True, inline="always")
+def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
+                kint, xfloor, c, h, phi_quiet2):
+    """One particle's increment in sub-steps of at most ``h`` (any increment, any N)."""
+    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
+    nsub = 1
+    if big > h:
+        nsub = int(math.ceil(big / h))
+    r = _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
+                   phi_quiet2)
+    _store(p, r, stress, back, eps_p, eps_eq, work)
+
+
+@nb.njit(cache=True, inline="always")
+def _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu,
+                           isy, N, kint, xfloor, c, h, phi_quiet2):
+    """The increment as a continuous function of ``de[p]`` (the implicit integrator's update).
+
+    ``_substepped`` takes ceil(r) sub-steps, r = max|de| / h: where r crosses an integer the
+    sub-step count jumps and the result with it, by the RK2 error (0.2 % of sigma_y from one
+    sub-step to two near the yield surface). Newton's iterations on a step whose increments
+    sit at such a jump cannot converge: the residual has no root there (issue 37: the
+    Northridge record stalled at 8.82 s at the smallest step). Here, for r > 1,
+    n = floor(r) and n + 1 sub-steps are blended with the weights 1 - (r - n) and r - n: equal
+    to n sub-steps at r = n, to n + 1 at r -> n + 1, continuous in between, and as accurate as
+    either (both integrate the same rate equation with sub-steps of at most h). Twice the cost
+    of the explicit update for the points that need it; the explicit integrator keeps
+    ``_substepped`` (the paper's update, bit for bit)."""
+    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
+    r = big / h
+    if r <= 1.0:
+        a = _integrate(1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor,
+                       c, phi_quiet2)
+        _store(p, a, stress, back, eps_p, eps_eq, work)
+        return
+    n = int(math.floor(r))
+    theta = r - n
+    a = _integrate(n, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
+                   phi_quiet2)
+    if theta == 0.0:
+        _store(p, a, stress, back, eps_p, eps_eq, work)
+        return
+    b = _integrate(n + 1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor,
+                   c, phi_quiet2)
+    wa = 1.0 - theta
+    blend = (wa * a[0] + theta * b[0], wa * a[1] + theta * b[1], wa * a[2] + theta * b[2],
+             wa * a[3] + theta * b[3], wa * a[4] + theta * b[4], wa * a[5] + theta * b[5],
+             wa * a[6] + theta * b[6], wa * a[7] + theta * b[7], wa * a[8] + theta * b[8],
+             wa * a[9] + theta * b[9], wa * a[10] + theta * b[10], wa * a[11] + theta * b[11],
+             wa * a[12] + theta * b[12], a[13] or b[13])
+    # an elastic pair (both False) stores the stress only: its back stress etc. are unchanged
+    _store(p, blend, stress, back, eps_p, eps_eq, work)
 
 
 @nb.njit(cache=True, inline="always")
@@ -350,7 +409,8 @@ _BLOCK = 64
 # division of each stage carries no exception branch and the block loop can be vectorised (the
 # one 0/0, at a stress-free point, is discarded by smooth_rate)
 @nb.njit(cache=True, error_model="numpy")
-def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which):
+def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which,
+                   continuous=False):
     """The particle loop of :meth:`SmoothVonMises.update_stress` (arrays updated in place).
 
     Two paths. Increments within one sub-step (nearly all of them in explicit MPM, whose
@@ -360,7 +420,9 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     particles per AVX-512 instruction: the sqrt and the division of each stage no longer
     serialise the particles), and the results are copied back. It evaluates the model even
     where the scalar path would take its exact elastic shortcuts; with beta ~ H1 below 2^-53
-    there, the two agree to round-off. Everything else takes the sub-stepped scalar path."""
+    there, the two agree to round-off. Everything else takes the sub-stepped scalar path, or with
+    ``continuous`` (the implicit integrator) its blend that is continuous in the increment
+    (``_substepped_continuous``)."""
     E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
     kint = 0
     if N == math.floor(N) and N <= _MAX_INT_POWER:
@@ -375,7 +437,12 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     n = stress.shape[0]
     if kint == 0:
         for p in range(n):
-            if which < 0 or mat_ids[p] == which:
+            if which >= 0 and mat_ids[p] != which:
+                continue
+            if continuous:
+                _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E,
+                                       nu, cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+            else:
                 _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps,
                             mu, isy, N, kint, xfloor, c, h, phi_quiet2)
         return
@@ -408,8 +475,12 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             if which >= 0 and mat_ids[p] != which:
                 continue
             if not fast[q]:
-                _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps,
-                            mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+                if continuous:
+                    _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain,
+                                           E, nu, cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+                else:
+                    _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu,
+                                cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
                 continue
             for k in range(4):
                 stress[p, k] = X[k, q] + Y[k, q]
@@ -519,7 +590,15 @@ class SmoothVonMises(KinematicHardening):
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
         _update_smooth(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
-                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which)
+                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which,
+                       self.continuous_in_increment)
+
+    #: the update as a continuous function of the increment (``_substepped_continuous``): set
+    #: for the implicit integrator, whose Newton iterations need it (use_integrator)
+    continuous_in_increment = False
+
+    def use_integrator(self, name):
+        self.continuous_in_increment = name == "implicit"
 
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
         """The paper's tangent modulus E_t at the end of the increment (``_smooth_tangent``):
