@@ -105,3 +105,56 @@ def test_within_one_sub_step_both_updates_agree():
     b = _update(stress, back, de, False, False)
     for x, y in zip(a, b):
         assert np.array_equal(x, y)
+
+
+def _tangent(stress, back, de, plane_strain, consistent):
+    n = len(de)
+    D = np.zeros((n, 3, 3))
+    ids = np.zeros(n, np.int32)
+    if consistent:
+        sv._consistent_tangent(D, stress, back, de, PARAMS, plane_strain, ids, -1)
+    else:
+        s1, b1, _, _ = _update(stress, back, de, plane_strain, True)
+        sv._smooth_tangent(D, s1, b1, de, PARAMS, plane_strain, ids, -1)
+    return D
+
+
+@pytest.mark.parametrize("plane_strain", [False, True])
+def test_consistent_tangent_is_the_updates_derivative(plane_strain):
+    """The implicit integrator's tangent of the smooth model is the derivative of its update:
+    against central differences of the update with a probe 30 times the tangent's (so that
+    neither shares the other's rounding), to the forward difference's truncation error (the
+    update's second derivative ~ E / eps_y times the probe: 1e-5 of E here)."""
+    rng = np.random.default_rng(5)
+    stress, back, d = _states(plane_strain, rng, n=30)
+    de = d * rng.uniform(0.3, 12.0, (len(d), 1)) * H
+    D = _tangent(stress, back, de, plane_strain, True)
+    step = 30 * sv._TANGENT_PROBE * SY / E
+    for j in range(3):
+        up, down = de.copy(), de.copy()
+        up[:, j] += step
+        down[:, j] -= step
+        central = (_update(stress, back, up, plane_strain, True)[0][:, :3]
+                   - _update(stress, back, down, plane_strain, True)[0][:, :3]) / (2 * step)
+        assert np.abs(D[:, :, j] - central).max() <= 1e-4 * E
+
+
+@pytest.mark.parametrize("plane_strain", [False, True])
+def test_consistent_tangent_tends_to_the_papers_modulus(plane_strain):
+    """For increments that shrink (a hundredth of a sub-step, loading) the derivative of the
+    update tends to the paper's tangent modulus E_t of the rate form (``_smooth_tangent``)."""
+    rng = np.random.default_rng(9)
+    stress, back, d = _states(plane_strain, rng, n=30)
+    t = stress - back
+    load = t[:, 0] * d[:, 0] + t[:, 1] * d[:, 1] + t[:, 2] * d[:, 2]
+    d[load < 0] *= -1.0   # loading directions: the rate form's H2 = 1
+    de = d * 1e-2 * H
+    Dc = _tangent(stress, back, de, plane_strain, True)
+    Dr = _tangent(stress, back, de, plane_strain, False)
+    # E_t changes by about E/eps_y per unit strain: over 1e-3 eps_y, some 1e-3 of E
+    assert np.abs(Dc - Dr).max() <= 5e-3 * E
+    # and these points do yield: E_t is far from the elastic matrix
+    De = np.zeros_like(Dr)
+    for p in range(len(De)):
+        sv.elastic_matrix(E, NU, plane_strain, De, p)
+    assert np.abs(Dr - De).max() > 0.1 * E

@@ -341,30 +341,35 @@ def _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strai
     either (both integrate the same rate equation with sub-steps of at most h). Twice the cost
     of the explicit update for the points that need it; the explicit integrator keeps
     ``_substepped`` (the paper's update, bit for bit)."""
+    r = _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                    phi_quiet2)
+    # an elastic pair (both False) stores the stress only: its back stress etc. are unchanged
+    _store(p, r, stress, back, eps_p, eps_eq, work)
+
+
+@nb.njit(cache=True, inline="always")
+def _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                phi_quiet2):
+    """The result of ``_substepped_continuous`` (``_integrate``'s tuple), not stored."""
     big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
     r = big / h
     if r <= 1.0:
-        a = _integrate(1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor,
-                       c, phi_quiet2)
-        _store(p, a, stress, back, eps_p, eps_eq, work)
-        return
+        return _integrate(1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint,
+                          xfloor, c, phi_quiet2)
     n = int(math.floor(r))
     theta = r - n
     a = _integrate(n, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
                    phi_quiet2)
     if theta == 0.0:
-        _store(p, a, stress, back, eps_p, eps_eq, work)
-        return
+        return a
     b = _integrate(n + 1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor,
                    c, phi_quiet2)
     wa = 1.0 - theta
-    blend = (wa * a[0] + theta * b[0], wa * a[1] + theta * b[1], wa * a[2] + theta * b[2],
-             wa * a[3] + theta * b[3], wa * a[4] + theta * b[4], wa * a[5] + theta * b[5],
-             wa * a[6] + theta * b[6], wa * a[7] + theta * b[7], wa * a[8] + theta * b[8],
-             wa * a[9] + theta * b[9], wa * a[10] + theta * b[10], wa * a[11] + theta * b[11],
-             wa * a[12] + theta * b[12], a[13] or b[13])
-    # an elastic pair (both False) stores the stress only: its back stress etc. are unchanged
-    _store(p, blend, stress, back, eps_p, eps_eq, work)
+    return (wa * a[0] + theta * b[0], wa * a[1] + theta * b[1], wa * a[2] + theta * b[2],
+            wa * a[3] + theta * b[3], wa * a[4] + theta * b[4], wa * a[5] + theta * b[5],
+            wa * a[6] + theta * b[6], wa * a[7] + theta * b[7], wa * a[8] + theta * b[8],
+            wa * a[9] + theta * b[9], wa * a[10] + theta * b[10], wa * a[11] + theta * b[11],
+            wa * a[12] + theta * b[12], a[13] or b[13])
 
 
 @nb.njit(cache=True, inline="always")
@@ -538,6 +543,58 @@ def _smooth_tangent(D, stress, back, de, params, plane_strain, mat_ids, which):
                 D[p, a, b] -= f * dm[a] * dm[b]
 
 
+#: the strain perturbation of the consistent tangent's differences, in yield strains: far above
+#: round-off (the stress differences are then 1e-7 of sigma_y, whose rounding is 1e-16 of it)
+#: and far below the strains over which the update's derivative changes (a sub-step, 0.1 eps_y)
+_TANGENT_PROBE = 1e-6
+
+
+@nb.njit(cache=True)
+def _consistent_tangent(D, stress0, back0, de, params, plane_strain, mat_ids, which):
+    """The derivative of the implicit update (``_substepped_continuous`` from the step's start
+    ``stress0``, ``back0`` by the increment ``de``) with respect to ``de``, by forward
+    differences of the update itself: the tangent Newton's method converges with (Simo &
+    Taylor 1985; by differences as Miehe 1996 and Perez-Foguet et al. 2000). Points whose update
+    is elastic get the elastic matrix (the update is then exactly D de). Not symmetric in
+    general (the loading test and the sub-steps): an LU factorisation takes it."""
+    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
+    kint = 0
+    if N == math.floor(N) and N <= _MAX_INT_POWER:
+        kint = int(N)
+    xfloor = _power_floor(kint)
+    c = alpha * E / (1.0 - alpha)
+    h = sy / E * min(0.1, 1.0 / N)
+    cps = E / (1.0 - nu * nu)
+    mu = E / (2.0 * (1.0 + nu))
+    isy = 1.0 / sy
+    phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2
+    probe = _TANGENT_PROBE * sy / E
+    s1 = np.empty((1, 4))
+    b1 = np.empty((1, 4))
+    d1 = np.empty((1, 3))
+    for p in range(D.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        elastic_matrix(E, nu, plane_strain, D, p)
+        for k in range(4):
+            s1[0, k] = stress0[p, k]
+            b1[0, k] = back0[p, k]
+        for k in range(3):
+            d1[0, k] = de[p, k]
+        base = _continuous(0, s1, d1, b1, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                           phi_quiet2)
+        if not base[13]:
+            continue   # elastic: D
+        for j in range(3):
+            d1[0, j] = de[p, j] + probe
+            r = _continuous(0, s1, d1, b1, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                            phi_quiet2)
+            d1[0, j] = de[p, j]
+            D[p, 0, j] = (r[0] - base[0]) / probe   # (a tuple of mixed types: no index loop)
+            D[p, 1, j] = (r[1] - base[1]) / probe
+            D[p, 2, j] = (r[2] - base[2]) / probe
+
+
 class SmoothVonMises(KinematicHardening):
     """The paper's smooth von Mises plasticity with Ziegler kinematic hardening.
 
@@ -601,8 +658,15 @@ class SmoothVonMises(KinematicHardening):
         self.continuous_in_increment = name == "implicit"
 
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
-        """The paper's tangent modulus E_t at the end of the increment (``_smooth_tangent``):
-        the rate form's own stiffness, not the derivative of the sub-stepped update, which it
-        approaches as the increment shrinks (Newton then converges fast but not quadratically
-        where the points yield)."""
+        """The derivative of the implicit update (``_consistent_tangent``, by differences), with
+        which Newton converges where the points yield; as the increment shrinks it tends to the
+        paper's tangent modulus E_t (``_smooth_tangent``, tests/unit/test_smooth_continuous.py).
+        The rate form's E_t at the end of the increment, which the first implicit slice used,
+        is not that derivative: Newton converged linearly with it and the Northridge record
+        needed step halvings wherever the frame yielded. With the fracture option the points
+        that soften take E_t (the fracture passes are not in the differenced update)."""
+        if self.continuous_in_increment and self.fracture is None:
+            _consistent_tangent(D, stress0, state0["back_stress"], de, self.params, self.plane_strain,
+                                mat_ids, which)
+            return
         _smooth_tangent(D, stress1, state1["back_stress"], de, self.params, self.plane_strain, mat_ids, which)
