@@ -141,22 +141,30 @@ def _phi2(plane_strain, tx, ty, txy, tz):
 
 
 @nb.njit(cache=True, inline="always")
-def _load(plane_strain, tx, ty, txy, tz, dexx, deyy, dgxy):
-    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain)."""
+def _load(plane_strain, consistent, tx, ty, txy, tz, dexx, deyy, dgxy, dse):
+    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain); with
+    ``consistent`` in plane stress, m . D d_eps (m = Phi n, ``dse`` = D d_eps): the sign of
+    n^T D d_eps, the consistent loading test (plane strain's dev(s) . d_eps has that sign)."""
     if plane_strain:
         mean = (tx + ty + tz) / 3.0
         return (tx - mean) * dexx + (ty - mean) * deyy + txy * dgxy
+    if consistent:
+        return (tx - 0.5 * ty) * dse[0] + (ty - 0.5 * tx) * dse[1] + 3.0 * txy * dse[2]
     return tx * dexx + ty * deyy + txy * dgxy
 
 
 @nb.njit(cache=True, inline="always")
-def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
+def smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse,
                 sxx, syy, sxy, szz, bxx, byy, bxy, bzz, dexx, deyy, dgxy):
     """Increments of stress, back stress and plastic strain for one strain increment.
 
     Parameters
     ----------
     plane_strain : bool
+    consistent : bool
+        Plane stress: H2 from the sign of n^T D d_eps instead of s . d_eps (the implicit
+        integrator's update, continuous where the loading test switches: the plastic part is
+        proportional to n^T D d_eps, which is then zero there; see SmoothVonMises.use_integrator).
     cps, nu, mu, isy, N, c : float
         E / (1 - nu^2), Poisson ratio, shear modulus, 1 / sigma_y, smoothness,
         Ziegler modulus alpha E / (1 - alpha).
@@ -191,6 +199,8 @@ def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
     else:
         phi2 = tx * tx - tx * ty + ty * ty + 3.0 * txy * txy
     load = tx * dexx + ty * deyy + txy * dgxy  # s . d_eps (dev(s) in plane strain); d_eps_zz = 0
+    if consistent and not plane_strain:
+        load = (tx - 0.5 * ty) * ds[0] + (ty - 0.5 * tx) * ds[1] + 3.0 * txy * ds[2]   # m . D d_eps
     # no branches (the block path vectorises this): an unloading or stress-free point gets
     # beta = 0, which leaves exactly the elastic increment D d_eps
     active = load >= 0.0 and phi2 * isy * isy > _PHI_FLOOR * _PHI_FLOOR
@@ -231,8 +241,8 @@ def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
 
 
 @nb.njit(cache=True, inline="always")
-def _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
-               phi_quiet2):
+def _integrate(nsub, p, stress, de, back, plane_strain, consistent, E, nu, cps, mu, isy, N, kint,
+               xfloor, c, phi_quiet2):
     """Particle p's increment ``de[p]`` in ``nsub`` equal RK2 sub-steps from its stored state.
 
     Returns the end state and the increment's plastic changes, (sxx, syy, sxy, szz, bxx, byy,
@@ -248,7 +258,7 @@ def _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, 
     dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
     # growth of the loading indicator over an elastic half step: d_eps . D d_eps >= 0
     # (its deviatoric part 2 mu dev(d_eps) . d_eps >= 0 in plane strain)
-    work_de = _load(plane_strain, dse[0], dse[1], dse[2], dse[3], dexx, deyy, dgxy)
+    work_de = _load(plane_strain, consistent, dse[0], dse[1], dse[2], dse[3], dexx, deyy, dgxy, dse)
     quiet = -1.0  # Phi(D d_eps)^2 / 2, computed when first needed
     for _ in range(nsub):
         phi2 = _phi2(plane_strain, sxx - bxx, syy - byy, sxy - bxy, szz - bzz)
@@ -264,7 +274,8 @@ def _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, 
                 sxy += dse[2]
                 szz += dse[3]
                 continue
-        load = _load(plane_strain, sxx - bxx, syy - byy, sxy - bxy, szz - bzz, dexx, deyy, dgxy)
+        load = _load(plane_strain, consistent, sxx - bxx, syy - byy, sxy - bxy, szz - bzz, dexx, deyy,
+                     dgxy, dse)
         if load + 0.5 * work_de < 0.0:
             # s . d_eps < 0 at the start and at the elastic midpoint (it grows by
             # 0.5 d_eps . D d_eps): both stages are elastic, so the step is exactly D d_eps.
@@ -274,9 +285,9 @@ def _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, 
             sxy += dse[2]
             szz += dse[3]
             continue
-        k = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse, sxx, syy, sxy, szz,
+        k = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse, sxx, syy, sxy, szz,
                         bxx, byy, bxy, bzz, dexx, deyy, dgxy)
-        m = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
+        m = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse,
                         sxx + 0.5 * k[0], syy + 0.5 * k[1], sxy + 0.5 * k[2], szz + 0.5 * k[3],
                         bxx + 0.5 * k[4], byy + 0.5 * k[5], bxy + 0.5 * k[6], bzz + 0.5 * k[7],
                         dexx, deyy, dgxy)
@@ -321,7 +332,7 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
     nsub = 1
     if big > h:
         nsub = int(math.ceil(big / h))
-    r = _integrate(nsub, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
+    r = _integrate(nsub, p, stress, de, back, plane_strain, False, E, nu, cps, mu, isy, N, kint, xfloor, c,
                    phi_quiet2)
     _store(p, r, stress, back, eps_p, eps_eq, work)
 
@@ -354,15 +365,15 @@ def _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint,
     big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
     r = big / h
     if r <= 1.0:
-        return _integrate(1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint,
+        return _integrate(1, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint,
                           xfloor, c, phi_quiet2)
     n = int(math.floor(r))
     theta = r - n
-    a = _integrate(n, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c,
+    a = _integrate(n, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint, xfloor, c,
                    phi_quiet2)
     if theta == 0.0:
         return a
-    b = _integrate(n + 1, p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor,
+    b = _integrate(n + 1, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint, xfloor,
                    c, phi_quiet2)
     wa = 1.0 - theta
     return (wa * a[0] + theta * b[0], wa * a[1] + theta * b[1], wa * a[2] + theta * b[2],
@@ -373,7 +384,7 @@ def _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint,
 
 
 @nb.njit(cache=True, inline="always")
-def _rk2_block(X, Y, nq, plane_strain, E, nu, cps, mu, isy, kint, xfloor, c):
+def _rk2_block(X, Y, nq, plane_strain, consistent, E, nu, cps, mu, isy, kint, xfloor, c):
     """Both RK2 stages of a block's single-sub-step increments from X into Y (see
     _update_smooth); no branches on particle data, contiguous buffers: vectorised."""
     for q in range(nq):
@@ -381,9 +392,9 @@ def _rk2_block(X, Y, nq, plane_strain, E, nu, cps, mu, isy, kint, xfloor, c):
         bxx, byy, bxy, bzz = X[4, q], X[5, q], X[6, q], X[7, q]
         dexx, deyy, dgxy = X[8, q], X[9, q], X[10, q]
         dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
-        k1 = smooth_rate(plane_strain, cps, nu, mu, isy, None, kint, xfloor, c, dse, sxx, syy, sxy, szz,
+        k1 = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, None, kint, xfloor, c, dse, sxx, syy, sxy, szz,
                          bxx, byy, bxy, bzz, dexx, deyy, dgxy)
-        m = smooth_rate(plane_strain, cps, nu, mu, isy, None, kint, xfloor, c, dse,
+        m = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, None, kint, xfloor, c, dse,
                         sxx + 0.5 * k1[0], syy + 0.5 * k1[1], sxy + 0.5 * k1[2],
                         szz + 0.5 * k1[3], bxx + 0.5 * k1[4], byy + 0.5 * k1[5],
                         bxy + 0.5 * k1[6], bzz + 0.5 * k1[7], dexx, deyy, dgxy)
@@ -472,9 +483,11 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             fast[q] = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2])) <= h
         # the loop with constant formulation flags, so that no branch on them is left in it
         if plane_strain:
-            _rk2_block(X, Y, nq, True, E, nu, cps, mu, isy, kint, xfloor, c)
+            _rk2_block(X, Y, nq, True, False, E, nu, cps, mu, isy, kint, xfloor, c)
+        elif continuous:   # the implicit update's loading test (use_integrator)
+            _rk2_block(X, Y, nq, False, True, E, nu, cps, mu, isy, kint, xfloor, c)
         else:
-            _rk2_block(X, Y, nq, False, E, nu, cps, mu, isy, kint, xfloor, c)
+            _rk2_block(X, Y, nq, False, False, E, nu, cps, mu, isy, kint, xfloor, c)
         for q in range(nq):
             p = p0 + q
             if which >= 0 and mat_ids[p] != which:
