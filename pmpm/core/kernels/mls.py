@@ -145,7 +145,7 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
-            p = p0 + q
+            p = np.uint64(p0 + q)   # unsigned: no negative-index wraparound in the many particle-array accesses
             mp, affine = affine_momentum(p, x, m, C, origin, inv_h, h)
             sx, sy = affine[4], affine[5]
             fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
@@ -175,7 +175,7 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
-            p = p0 + q
+            p = np.uint64(p0 + q)   # unsigned: no negative-index wraparound in the many particle-array accesses
             if K == 2:
                 vx, vy = gather2(G, 1, q, K, I0, J0, WX, WY, ox, oy)
                 lxx, lxy, lyx, lyy = gather_gradient(G, 1, q, K, I0, J0, WX, WY, ox, oy)
