@@ -17,10 +17,13 @@ fraction f of its cell): the kernels take the gradient itself there.
 
 The force's torque about any point vanishes for a symmetric stress
 (sum_i (x_i - x_p) (x) g_ip = I), so with the affine momentum the transfers conserve angular
-momentum. The loops are pmpm.core.kernels.transfer's (``scatter_p2g``, ``gather2``,
-``gather_gradient``) and the APIC module's (``affine_moments``, ``gather_affine``,
-``affine_matrix``). The position update x += dx and the stress update are the step's later
-passes (no grid visit).
+momentum. The linear kernels' loops are pmpm.core.kernels.transfer's (``scatter_p2g``,
+``gather2``, ``gather_gradient``); the quadratic and cubic ones are this module's, written for
+speed (docs/performance.md, "The MLS step made faster"): D_p^-1 is the B-spline's constant
+wherever the support is not boundary-modified (``_inverse_moments``), the gather sums by rows,
+the scatter indexes a flat view of the grid, and both kernels let the compiler fuse multiplies
+and adds (FMA; no fast-math assumption about NaN or infinity, so the non-finite checks hold).
+The position update x += dx and the stress update are the step's later passes (no grid visit).
 """
 import math
 
@@ -41,10 +44,13 @@ def _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mvx, mvy
     """Particle q's MLS scatter (quadratic, cubic): node (i0 + a, j0 + b), at (ex_a, ey_b) =
     (i0 + a - sx, j0 + b - sy) cells from the particle, gets w_a w_b times m, m v + k (ex_a, ey_b)
     (``k`` = (kxx, kxy, kyx, kyy) of pmpm.core.kernels.affine.affine_momentum) and, with
-    ``force``, f_ext + A (ex_a, ey_b) into fields 0 .. 4."""
+    ``force``, f_ext + A (ex_a, ey_b) into fields 0 .. 4. ``Gf`` is the grid's fields
+    flattened (``nf`` fields a node, ``row`` = nodes per window row times nf): one unsigned
+    index per node, where G[ii, jj, f] cost each access the negative-index wraparound of three
+    indices (the same sums to the bit)."""
     i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
     j0 = J0[q]
-    base = np.uint64((i0 - ox) * row + (j0 - oy) * nf)
+    base = np.uint64((i0 - ox) * row + (j0 - oy) * nf)   # node (i0, j0)'s first field
     for a in range(K):
         wa = WX[a, q]
         ex = i0 + a - sx
@@ -141,7 +147,7 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     h = 1.0 / inv_h
     nf = G.shape[2]
     row = G.shape[1] * nf
-    Gf = G.reshape(-1)
+    Gf = G.reshape(-1)   # a view (the window is C-contiguous): the scatter's flat node index
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
@@ -155,8 +161,8 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
             else:
                 ixx, ixy, iyy = _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy)
                 # A = (-V sigma / h) D^-1: the force N_i A (x_i - x_p), the form of the momentum's
-                _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mp * v[p, 0], mp * v[p, 1], affine,
-                             with_force, fx, fy,
+                _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mp * v[p, 0], mp * v[p, 1],
+                             affine, with_force, fx, fy,
                              (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy,
                               sxy * ixx + syy * ixy, sxy * ixy + syy * iyy))
 
