@@ -126,6 +126,7 @@ def build_solver(scene, comm=None):
     materials = _materials(scene, comm)
     for material in materials:   # a length tied to the cell (the fracture's crack band)
         material.use_cell_size(grid.h)
+        material.use_integrator(cfg.integrator)
     scheme = make_scheme(cfg.scheme, cfg)
     transfer = scheme.choose_transfer(make_transfer(cfg.transfer, cfg))   # mls brings its own
     reach = ghost_width(cfg.shape_function, cfg.interpolation)

@@ -65,6 +65,9 @@ def run(scene, comm, every=1, progress=True):
     x0 = tracker.sample()[order, 0].copy()
     t, drift = [0.0], [np.zeros(3)]
     first_yield = None
+    bodies = [b.name for b in scene.bodies]
+    members = _members(bodies)
+    yielded = {}   # member -> (t, x, y, eps_p_eq) when its steel first yields
     start, cpu = time.perf_counter(), time.process_time()
     shown = 0.0
     end = scene.solver.end_time
@@ -75,14 +78,18 @@ def run(scene, comm, every=1, progress=True):
         t.append(s.t)
         drift.append(tracker.sample()[order, 0] - x0 - ground.displacement(s.t))
         if first_yield is None and "eps_p_eq" in s.particles.fields:
-            first_yield = _first_yield(s, comm, [b.name for b in scene.bodies])
+            first_yield = _first_yield(s, comm, bodies)
+        if "eps_p_eq" in s.particles.fields and len(yielded) < len(set(members)):
+            _yielding_members(s, comm, members, yielded)
         if progress and comm.rank == 0 and s.t >= shown:
             print(f"\r  t = {s.t:.2f} / {end:g} s, {s.step_count} steps, {time.perf_counter() - start:.0f} s wall",
                   end="", file=sys.stderr, flush=True)
             shown += end / 100
     if progress and comm.rank == 0:
         print(file=sys.stderr)
-    return {"t": np.array(t), "drift": np.array(drift), "first_yield": first_yield,
+    sequence = sorted(({"member": m, "t": v[0], "x": v[1], "y": v[2]} for m, v in yielded.items()),
+                      key=lambda r: r["t"])
+    return {"t": np.array(t), "drift": np.array(drift), "first_yield": first_yield, "yield_sequence": sequence,
             "wall_s": time.perf_counter() - start, "cpu_s": time.process_time() - cpu, "steps": s.step_count,
             "stats": dict(getattr(s.scheme, "stats", {}))}
 
@@ -98,6 +105,35 @@ def _first_yield(s, comm, bodies):
     if eps < YIELDED:
         return None
     return {"t": float(s.t), "x": x[0], "y": x[1], "member": bodies[body], "eps_p_eq": eps}
+
+
+def _members(bodies):
+    """The member each body belongs to: a frame's joint panel (``<column>_panel_<joint>``)
+    counts as its column's."""
+    return [b.split("_panel_")[0] for b in bodies]
+
+
+def _yielding_members(s, comm, members, yielded):
+    """Add to ``yielded`` the members whose largest plastic strain first passes YIELDED now:
+    member -> (time, x, y of that particle)."""
+    e, body, x = s.particles["eps_p_eq"], s.particles["body"], s.particles["x"]
+    names = sorted(set(members))
+    local = []
+    for name in names:
+        if name in yielded:
+            continue
+        ids = [k for k, m in enumerate(members) if m == name]
+        mine = np.isin(body, ids) & (e >= YIELDED)
+        if np.any(mine):
+            k = int(np.flatnonzero(mine)[np.argmax(e[mine])])
+            local.append((name, float(e[k]), float(x[k, 0]), float(x[k, 1])))
+    best = {}
+    for rows in comm.allgather(local):
+        for name, eps, px, py in rows:
+            if name not in best or eps > best[name][0]:
+                best[name] = (eps, px, py)
+    for name, (eps, px, py) in best.items():
+        yielded[name] = (float(s.t), px, py, eps)
 
 
 def summary(result):
@@ -120,17 +156,26 @@ def main(argv=None):
     ap.add_argument("--t-end", type=float, default=15.0)
     ap.add_argument("--dt", type=float, default=None, help="the implicit step (default the variant's 0.01 s)")
     ap.add_argument("--explicit", type=float, default=0.0, metavar="T", help="also the explicit run to T s")
+    ap.add_argument("--implicit", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="[solver.implicit] keys over the variant's, e.g. newton=modified")
+    ap.add_argument("--petsc", nargs="*", default=[], metavar="NAME=VALUE", help="[solver.petsc] options")
+    ap.add_argument("--save", metavar="FILE.npz", help="write the drift histories (both runs) here")
+    ap.add_argument("--plot", metavar="FILE.png", help="draw the drift histories here")
     a = ap.parse_args(argv)
     comm = MPI.COMM_WORLD
     scene = strip_explicit_only(scene_at(a.cell, a.ppc, VARIANT))
     solver = dataclasses.replace(scene.solver, end_time=float(a.t_end),
-                                 time_step=float(a.dt or scene.solver.time_step))
+                                 time_step=float(a.dt or scene.solver.time_step),
+                                 implicit={**scene.solver.implicit, **_implicit_keys(a.implicit)},
+                                 petsc={**scene.solver.petsc, **_implicit_keys(a.petsc)})
     scene = dataclasses.replace(scene, solver=solver)
     res = run(scene, comm)
     out = {"study": "northridge_implicit", "cell": a.cell, "ppc": a.ppc, "ranks": comm.size, "t_end": a.t_end,
            "time_step": scene.solver.time_step, "wall_s": res["wall_s"], "cpu_s_rank0": res["cpu_s"],
            "steps": res["steps"],
-           "stats": res["stats"], "first_yield": res["first_yield"], **summary(res)}
+           "stats": res["stats"], "first_yield": res["first_yield"], "yield_sequence": res["yield_sequence"],
+           "implicit_options": a.implicit, "petsc_options": a.petsc, **summary(res)}
+    ex = None
     if a.explicit > 0:
         ex = run(explicit_twin(scene, a.explicit), comm, every=20)
         ti, ri = res["t"], res["drift"][:, 2]
@@ -151,11 +196,58 @@ def main(argv=None):
         fy = out["first_yield"]
         print("  first yield: " + ("none" if fy is None else
                                    f"t = {fy['t']:.2f} s at ({fy['x']:.2f}, {fy['y']:.2f}) m ({fy['member']})"))
+        for row in out["yield_sequence"]:
+            print(f"    {row['member']} yields at t = {row['t']:.2f} s, at ({row['x']:.2f}, {row['y']:.2f}) m")
         if "explicit" in out:
             e = out["explicit"]
             print(f"  explicit over the first {e['t_end']:g} s: {e['steps']} steps, {e['wall_s']:.0f} s wall; roof drift "
                   f"RMS difference {100 * e['roof_rms_difference_of_peak']:.2f} % of the implicit peak")
+        if a.save:
+            extra = {"explicit_t": ex["t"], "explicit_drift": ex["drift"]} if ex is not None else {}
+            np.savez(a.save, t=res["t"], drift=res["drift"], **extra)
+        if a.plot:
+            _plot(a.plot, res, ex, a.cell)
         print(json.dumps(out))
+
+
+def _implicit_keys(pairs):
+    """``KEY=VALUE`` strings as scene values (numbers, true/false, else strings)."""
+    out = {}
+    for pair in pairs:
+        key, value = pair.split("=", 1)
+        if value in ("true", "false"):
+            out[key] = value == "true"
+            continue
+        for kind in (int, float):
+            try:
+                out[key] = kind(value)
+                break
+            except ValueError:
+                continue
+        else:
+            out[key] = value
+    return out
+
+
+def _plot(path, res, ex, cell):
+    """The floors' and the roof's drift histories (the explicit run's over its span)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for k, ax in enumerate(axes):
+        j = 2 - k   # the roof on top
+        ax.plot(res["t"], 1e3 * res["drift"][:, j], lw=0.8, label="implicit (Newmark, 0.01 s)")
+        if ex is not None:
+            ax.plot(ex["t"], 1e3 * ex["drift"][:, j], lw=0.8, ls="--", label="explicit (MUSL, CFL 0.9)")
+        ax.set_ylabel(f"{('roof', 'floor 3', 'floor 2')[k]} drift (mm)")
+        ax.axhline(0.0, color="0.7", lw=0.5)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title(f"Three-storey frame, Northridge RSN 953, {cell:g} m cells: drifts relative to the ground")
+    axes[-1].set_xlabel("t (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,11 @@ CHANGEABLE_ON_RESTART = (
     "solver.end_time", "solver.max_steps", "solver.max_estimated_steps",
     # the step may change, so a diverged run continues from its last good state with a smaller one
     "solver.cfl", "solver.time_step", "solver.allow_unstable_time_step",
+    # and so may the implicit solve's controls (not the answer it converges to within them): a
+    # run whose Newton iterations failed continues with other tolerances, iterations or solvers
+    "solver.implicit.residual_tolerance", "solver.implicit.energy_tolerance",
+    "solver.implicit.max_iterations", "solver.implicit.newton", "solver.implicit.line_search",
+    "solver.implicit.max_halvings", "solver.petsc",
     "output.directory", "output.interval", "output.history_interval",
     "output.checkpoint_interval", "output.progress_interval", "output.deformed_plot",
     "output.hysteresis",
@@ -71,8 +76,10 @@ def fingerprint(record):
 
 
 def first_difference(ours, theirs):
-    """The first dotted key (in sorted order) whose value differs, or None."""
-    for key in sorted(set(ours) | set(theirs)):
+    """The first dotted key (in sorted order) whose value differs, or None (keys changeable on
+    restart are skipped on both sides: a checkpoint written when one of them was not recorded
+    it)."""
+    for key in sorted(k for k in set(ours) | set(theirs) if not _changeable(k)):
         if ours.get(key, "<absent>") != theirs.get(key, "<absent>"):
             return key
     return None

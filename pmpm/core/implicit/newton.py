@@ -12,6 +12,14 @@ where du is the correction the last factorisation gives for R_k (a back-substitu
 factorisation) and the force scale is the norm of the internal and external forces at the
 step's start (so that a step that starts in equilibrium does not chase round-off).
 
+Tangent updates (``newton``): ``"full"`` (the default) assembles and factors the tangent at
+every iteration; ``"modified"`` keeps the step's first factorisation while each iteration cuts
+the residual at least by ``REFACTOR_RATE`` and refactors at the iterate where one did not (a
+back-substitution and a residual cost a fraction of an assembly and a factorisation: the
+factorisation is most of an iteration on the frames, docs/implicit.md). With the smooth
+model's rate tangent, which is not its update's derivative, full Newton converges linearly
+where the points yield anyway, so the modified iterations lose little rate.
+
 Line search (``line_search = true``; off by default): the step length s is halved while the
 energy slope along the correction does not shrink, |du . R(u + s du)| > |du . R(u)|
 (Crisfield's criterion), at most ``LINE_SEARCH_CUTS`` times. Not the residual norm: the
@@ -29,6 +37,10 @@ logger = logging.getLogger(__name__)
 
 #: line-search cuts of the step length (1/2 each) before the best trial is taken
 LINE_SEARCH_CUTS = 5
+#: modified Newton: an iteration that leaves more than this fraction of the residual has the
+#: tangent refactored at its iterate (a linear rate of 1/4 halves the iterations' cost against
+#: a refactoring per iteration, judged by the portal and the frame: docs/implicit.md)
+REFACTOR_RATE = 0.25
 
 
 class NewtonFailed(ArithmeticError):
@@ -45,18 +57,22 @@ def newton(problem, u, opts, history=None):
     u : ndarray
         The first guess (the predictor), overwritten by the converged increment.
     opts : dict
-        ``residual_tolerance``, ``energy_tolerance``, ``max_iterations``, ``line_search``.
+        ``residual_tolerance``, ``energy_tolerance``, ``max_iterations``, ``line_search``,
+        optionally ``newton`` ("full" or "modified").
     history : list, optional
         Receives (|R_k|, energy_k) per iteration.
 
     Returns
     -------
     int
-        Iterations (tangent factorisations) taken.
+        Iterations taken (each a linear solve; with ``newton = "modified"`` fewer of them
+        assemble and factor the tangent: ``problem.factorisations`` counts those).
     """
     r, norm = problem.residual(u)
     scale = max(norm, problem.force_scale)
     energy0 = None
+    modified = opts.get("newton", "full") == "modified"
+    refactor = True
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):
             raise NewtonFailed(f"residual not finite at iteration {k}")
@@ -73,7 +89,8 @@ def newton(problem, u, opts, history=None):
             return k
         if k == opts["max_iterations"]:
             break
-        problem.tangent(u)
+        if refactor or not modified:
+            problem.tangent(u)
         du = problem.solve(r)
         energy = abs(problem.dot(du, r))
         if energy0 is None:
@@ -83,7 +100,9 @@ def newton(problem, u, opts, history=None):
             energy0 = energy * (scale / norm) ** 2 if energy > 0.0 and norm > 0.0 else 1.0
         if history is not None and not (norm <= opts["residual_tolerance"] * scale and k > 0):
             history.append((norm, energy))
+        previous = norm
         r, norm = _step(problem, u, du, r, norm, opts["line_search"])
+        refactor = norm > REFACTOR_RATE * previous
     raise NewtonFailed(f"no convergence in {opts['max_iterations']} iterations (residual {norm:.3g}, "
                        f"{norm / scale:.3g} of the force scale)")
 

@@ -9,6 +9,7 @@
     residual_tolerance = 1e-8      # |R| <= tol * max(|R_0|, |f_int| + |f_ext| at the start)
     energy_tolerance = 1e-12       # |du . R| <= tol * |du_0 . R_0|
     max_iterations = 25            # Newton iterations before the step is halved
+    newton = "full"                # | "modified": refactor the tangent only where the rate is slow
     line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
     hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
@@ -31,10 +32,12 @@ __all__ = ["read_integrator", "INTEGRATORS", "ANALYSES", "IMPLICIT_DEFAULTS", "r
 
 INTEGRATORS = ("explicit", "implicit")
 ANALYSES = ("dynamic", "static")
+#: tangent updates of Newton's iterations (pmpm.core.implicit.newton)
+NEWTON_VARIANTS = ("full", "modified")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
-                     "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False}
+                     "newton": "full", "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False}
 
 
 def read_integrator(t):
@@ -63,6 +66,7 @@ def read_implicit(t):
            "energy_tolerance": t.number("energy_tolerance", d["energy_tolerance"], low=0.0, high=1.0,
                                         low_open=True, high_open=True),
            "max_iterations": t.integer("max_iterations", d["max_iterations"], low=1, high=1000),
+           "newton": t.string("newton", d["newton"], choices=NEWTON_VARIANTS),
            "line_search": t.boolean("line_search", d["line_search"]),
            "max_halvings": t.integer("max_halvings", d["max_halvings"], low=0, high=40),
            # HHT-alpha: 0 is the trapezoidal rule, -1/3 the most damping of the high modes

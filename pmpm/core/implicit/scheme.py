@@ -54,7 +54,7 @@ class ImplicitNewmark:
         self.linear = None
         self.fraction = 1.0        # current step length / the scene's step
         self.converged_in_row = 0
-        self.stats = {"steps": 0, "newton_iterations": 0, "residual_evaluations": 0,
+        self.stats = {"steps": 0, "newton_iterations": 0, "factorisations": 0, "residual_evaluations": 0,
                       "linear_iterations": 0, "halvings": 0}
         self.history = []          # (|R|, energy) of the last step's iterations
         self.held_force = np.zeros(2)   # sum of the nodal forces on held components (last step)
@@ -117,9 +117,10 @@ class ImplicitNewmark:
                 self.converged_in_row = 0
         if s.t + dt >= s.options.end_time * (1.0 - 1e-12) and s.decomp.rank == 0:
             st = self.stats
-            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d residual evaluations, "
-                        "%d linear iterations, %d halvings", st["steps"], st["newton_iterations"],
-                        st["newton_iterations"] / max(st["steps"], 1), st["residual_evaluations"],
+            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d factorisations, "
+                        "%d residual evaluations, %d linear iterations, %d halvings", st["steps"],
+                        st["newton_iterations"], st["newton_iterations"] / max(st["steps"], 1),
+                        st["factorisations"], st["residual_evaluations"],
                         st["linear_iterations"], st["halvings"])
 
     @staticmethod
@@ -260,6 +261,7 @@ class ImplicitNewmark:
             raise NewtonFailed(str(exc)) from None
         finally:
             self.stats["residual_evaluations"] += problem.evaluations
+            self.stats["factorisations"] += problem.factorisations
             self.stats["linear_iterations"] = self.linear.iterations
         if not self.options_checked and self.linear.ksp is not None:   # after the first solve
             self.linear.check_unused()

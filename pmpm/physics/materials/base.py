@@ -127,6 +127,10 @@ class Material:
         """Told the grid's cell size ``h`` once the run's grid is known (pmpm.build): a model
         with a length scale tied to the cell (the fracture's crack band) reads it here."""
 
+    def use_integrator(self, name):
+        """Told the run's integrator (``solver.integrator``) once by pmpm.build: a model whose
+        update is tuned for one of them (the smooth model's sub-steps) chooses here."""
+
     # -- elasticity shared by every model ---------------------------------------------------
     @property
     def params(self):

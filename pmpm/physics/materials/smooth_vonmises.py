@@ -141,22 +141,30 @@ def _phi2(plane_strain, tx, ty, txy, tz):
 
 
 @nb.njit(cache=True, inline="always")
-def _load(plane_strain, tx, ty, txy, tz, dexx, deyy, dgxy):
-    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain)."""
+def _load(plane_strain, consistent, tx, ty, txy, tz, dexx, deyy, dgxy, dse):
+    """The loading indicator of H2: s . d_eps (dev(s) . d_eps in plane strain); with
+    ``consistent`` in plane stress, m . D d_eps (m = Phi n, ``dse`` = D d_eps): the sign of
+    n^T D d_eps, the consistent loading test (plane strain's dev(s) . d_eps has that sign)."""
     if plane_strain:
         mean = (tx + ty + tz) / 3.0
         return (tx - mean) * dexx + (ty - mean) * deyy + txy * dgxy
+    if consistent:
+        return (tx - 0.5 * ty) * dse[0] + (ty - 0.5 * tx) * dse[1] + 3.0 * txy * dse[2]
     return tx * dexx + ty * deyy + txy * dgxy
 
 
 @nb.njit(cache=True, inline="always")
-def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
+def smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse,
                 sxx, syy, sxy, szz, bxx, byy, bxy, bzz, dexx, deyy, dgxy):
     """Increments of stress, back stress and plastic strain for one strain increment.
 
     Parameters
     ----------
     plane_strain : bool
+    consistent : bool
+        Plane stress: H2 from the sign of n^T D d_eps instead of s . d_eps (the implicit
+        integrator's update, continuous where the loading test switches: the plastic part is
+        proportional to n^T D d_eps, which is then zero there; see SmoothVonMises.use_integrator).
     cps, nu, mu, isy, N, c : float
         E / (1 - nu^2), Poisson ratio, shear modulus, 1 / sigma_y, smoothness,
         Ziegler modulus alpha E / (1 - alpha).
@@ -191,6 +199,8 @@ def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
     else:
         phi2 = tx * tx - tx * ty + ty * ty + 3.0 * txy * txy
     load = tx * dexx + ty * deyy + txy * dgxy  # s . d_eps (dev(s) in plane strain); d_eps_zz = 0
+    if consistent and not plane_strain:
+        load = (tx - 0.5 * ty) * ds[0] + (ty - 0.5 * tx) * ds[1] + 3.0 * txy * ds[2]   # m . D d_eps
     # no branches (the block path vectorises this): an unloading or stress-free point gets
     # beta = 0, which leaves exactly the elastic increment D d_eps
     active = load >= 0.0 and phi2 * isy * isy > _PHI_FLOOR * _PHI_FLOOR
@@ -231,13 +241,12 @@ def smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
 
 
 @nb.njit(cache=True, inline="always")
-def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
-                kint, xfloor, c, h, phi_quiet2):
-    """One particle's increment in sub-steps of at most ``h`` (any increment, any N)."""
-    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
-    nsub = 1
-    if big > h:
-        nsub = int(math.ceil(big / h))
+def _integrate(nsub, p, stress, de, back, plane_strain, consistent, E, nu, cps, mu, isy, N, kint,
+               xfloor, c, phi_quiet2):
+    """Particle p's increment ``de[p]`` in ``nsub`` equal RK2 sub-steps from its stored state.
+
+    Returns the end state and the increment's plastic changes, (sxx, syy, sxy, szz, bxx, byy,
+    bxy, bzz, dpxx, dpyy, dpxy, d_eps_p_eq, d_work, plastic), without storing them."""
     inv = 1.0 / nsub
     dexx = de[p, 0] * inv
     deyy = de[p, 1] * inv
@@ -249,7 +258,7 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
     dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
     # growth of the loading indicator over an elastic half step: d_eps . D d_eps >= 0
     # (its deviatoric part 2 mu dev(d_eps) . d_eps >= 0 in plane strain)
-    work_de = _load(plane_strain, dse[0], dse[1], dse[2], dse[3], dexx, deyy, dgxy)
+    work_de = _load(plane_strain, consistent, dse[0], dse[1], dse[2], dse[3], dexx, deyy, dgxy, dse)
     quiet = -1.0  # Phi(D d_eps)^2 / 2, computed when first needed
     for _ in range(nsub):
         phi2 = _phi2(plane_strain, sxx - bxx, syy - byy, sxy - bxy, szz - bzz)
@@ -265,7 +274,8 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
                 sxy += dse[2]
                 szz += dse[3]
                 continue
-        load = _load(plane_strain, sxx - bxx, syy - byy, sxy - bxy, szz - bzz, dexx, deyy, dgxy)
+        load = _load(plane_strain, consistent, sxx - bxx, syy - byy, sxy - bxy, szz - bzz, dexx, deyy,
+                     dgxy, dse)
         if load + 0.5 * work_de < 0.0:
             # s . d_eps < 0 at the start and at the elastic midpoint (it grows by
             # 0.5 d_eps . D d_eps): both stages are elastic, so the step is exactly D d_eps.
@@ -275,9 +285,9 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
             sxy += dse[2]
             szz += dse[3]
             continue
-        k = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse, sxx, syy, sxy, szz,
+        k = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse, sxx, syy, sxy, szz,
                         bxx, byy, bxy, bzz, dexx, deyy, dgxy)
-        m = smooth_rate(plane_strain, cps, nu, mu, isy, N, kint, xfloor, c, dse,
+        m = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, N, kint, xfloor, c, dse,
                         sxx + 0.5 * k[0], syy + 0.5 * k[1], sxy + 0.5 * k[2], szz + 0.5 * k[3],
                         bxx + 0.5 * k[4], byy + 0.5 * k[5], bxy + 0.5 * k[6], bzz + 0.5 * k[7],
                         dexx, deyy, dgxy)
@@ -297,19 +307,84 @@ def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, c
         pyy += m[9]
         pxy += m[10]
         eq += abs(m[11])
-    stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = sxx, syy, sxy, szz
-    if plastic:  # elastic points leave their state untouched (saves the stores)
-        back[p, 0], back[p, 1], back[p, 2], back[p, 3] = bxx, byy, bxy, bzz
-        if eps_p is not None:  # kept only when output (diagnostic_fields)
-            eps_p[p, 0] += pxx
-            eps_p[p, 1] += pyy
-            eps_p[p, 2] += pxy
-        eps_eq[p] += eq
-        work[p] += w
+    return sxx, syy, sxy, szz, bxx, byy, bxy, bzz, pxx, pyy, pxy, eq, w, plastic
 
 
 @nb.njit(cache=True, inline="always")
-def _rk2_block(X, Y, nq, plane_strain, E, nu, cps, mu, isy, kint, xfloor, c):
+def _store(p, r, stress, back, eps_p, eps_eq, work):
+    """Store an ``_integrate`` result ``r`` as particle p's state."""
+    stress[p, 0], stress[p, 1], stress[p, 2], stress[p, 3] = r[0], r[1], r[2], r[3]
+    if r[13]:  # elastic points leave their state untouched (saves the stores)
+        back[p, 0], back[p, 1], back[p, 2], back[p, 3] = r[4], r[5], r[6], r[7]
+        if eps_p is not None:  # kept only when output (diagnostic_fields)
+            eps_p[p, 0] += r[8]
+            eps_p[p, 1] += r[9]
+            eps_p[p, 2] += r[10]
+        eps_eq[p] += r[11]
+        work[p] += r[12]
+
+
+@nb.njit(cache=True, inline="always")
+def _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu, isy, N,
+                kint, xfloor, c, h, phi_quiet2):
+    """One particle's increment in sub-steps of at most ``h`` (any increment, any N)."""
+    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
+    nsub = 1
+    if big > h:
+        nsub = int(math.ceil(big / h))
+    r = _integrate(nsub, p, stress, de, back, plane_strain, False, E, nu, cps, mu, isy, N, kint, xfloor, c,
+                   phi_quiet2)
+    _store(p, r, stress, back, eps_p, eps_eq, work)
+
+
+@nb.njit(cache=True, inline="always")
+def _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps, mu,
+                           isy, N, kint, xfloor, c, h, phi_quiet2):
+    """The increment as a continuous function of ``de[p]`` (the implicit integrator's update).
+
+    ``_substepped`` takes ceil(r) sub-steps, r = max|de| / h: where r crosses an integer the
+    sub-step count jumps and the result with it, by the RK2 error (0.2 % of sigma_y from one
+    sub-step to two near the yield surface). Newton's iterations on a step whose increments
+    sit at such a jump cannot converge: the residual has no root there (issue 37: the
+    Northridge record stalled at 8.82 s at the smallest step). Here, for r > 1,
+    n = floor(r) and n + 1 sub-steps are blended with the weights 1 - (r - n) and r - n: equal
+    to n sub-steps at r = n, to n + 1 at r -> n + 1, continuous in between, and as accurate as
+    either (both integrate the same rate equation with sub-steps of at most h). Twice the cost
+    of the explicit update for the points that need it; the explicit integrator keeps
+    ``_substepped`` (the paper's update, bit for bit)."""
+    r = _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                    phi_quiet2)
+    # an elastic pair (both False) stores the stress only: its back stress etc. are unchanged
+    _store(p, r, stress, back, eps_p, eps_eq, work)
+
+
+@nb.njit(cache=True, inline="always")
+def _continuous(p, stress, de, back, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                phi_quiet2):
+    """The result of ``_substepped_continuous`` (``_integrate``'s tuple), not stored."""
+    big = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2]))
+    r = big / h
+    if r <= 1.0:
+        return _integrate(1, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint,
+                          xfloor, c, phi_quiet2)
+    n = int(math.floor(r))
+    theta = r - n
+    a = _integrate(n, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint, xfloor, c,
+                   phi_quiet2)
+    if theta == 0.0:
+        return a
+    b = _integrate(n + 1, p, stress, de, back, plane_strain, True, E, nu, cps, mu, isy, N, kint, xfloor,
+                   c, phi_quiet2)
+    wa = 1.0 - theta
+    return (wa * a[0] + theta * b[0], wa * a[1] + theta * b[1], wa * a[2] + theta * b[2],
+            wa * a[3] + theta * b[3], wa * a[4] + theta * b[4], wa * a[5] + theta * b[5],
+            wa * a[6] + theta * b[6], wa * a[7] + theta * b[7], wa * a[8] + theta * b[8],
+            wa * a[9] + theta * b[9], wa * a[10] + theta * b[10], wa * a[11] + theta * b[11],
+            wa * a[12] + theta * b[12], a[13] or b[13])
+
+
+@nb.njit(cache=True, inline="always")
+def _rk2_block(X, Y, nq, plane_strain, consistent, E, nu, cps, mu, isy, kint, xfloor, c):
     """Both RK2 stages of a block's single-sub-step increments from X into Y (see
     _update_smooth); no branches on particle data, contiguous buffers: vectorised."""
     for q in range(nq):
@@ -317,9 +392,9 @@ def _rk2_block(X, Y, nq, plane_strain, E, nu, cps, mu, isy, kint, xfloor, c):
         bxx, byy, bxy, bzz = X[4, q], X[5, q], X[6, q], X[7, q]
         dexx, deyy, dgxy = X[8, q], X[9, q], X[10, q]
         dse = elastic_increment(E, nu, plane_strain, dexx, deyy, dgxy)
-        k1 = smooth_rate(plane_strain, cps, nu, mu, isy, None, kint, xfloor, c, dse, sxx, syy, sxy, szz,
+        k1 = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, None, kint, xfloor, c, dse, sxx, syy, sxy, szz,
                          bxx, byy, bxy, bzz, dexx, deyy, dgxy)
-        m = smooth_rate(plane_strain, cps, nu, mu, isy, None, kint, xfloor, c, dse,
+        m = smooth_rate(plane_strain, consistent, cps, nu, mu, isy, None, kint, xfloor, c, dse,
                         sxx + 0.5 * k1[0], syy + 0.5 * k1[1], sxy + 0.5 * k1[2],
                         szz + 0.5 * k1[3], bxx + 0.5 * k1[4], byy + 0.5 * k1[5],
                         bxy + 0.5 * k1[6], bzz + 0.5 * k1[7], dexx, deyy, dgxy)
@@ -350,7 +425,8 @@ _BLOCK = 64
 # division of each stage carries no exception branch and the block loop can be vectorised (the
 # one 0/0, at a stress-free point, is discarded by smooth_rate)
 @nb.njit(cache=True, error_model="numpy")
-def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which):
+def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, mat_ids, which,
+                   continuous=False):
     """The particle loop of :meth:`SmoothVonMises.update_stress` (arrays updated in place).
 
     Two paths. Increments within one sub-step (nearly all of them in explicit MPM, whose
@@ -360,7 +436,9 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     particles per AVX-512 instruction: the sqrt and the division of each stage no longer
     serialise the particles), and the results are copied back. It evaluates the model even
     where the scalar path would take its exact elastic shortcuts; with beta ~ H1 below 2^-53
-    there, the two agree to round-off. Everything else takes the sub-stepped scalar path."""
+    there, the two agree to round-off. Everything else takes the sub-stepped scalar path, or with
+    ``continuous`` (the implicit integrator) its blend that is continuous in the increment
+    (``_substepped_continuous``)."""
     E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
     kint = 0
     if N == math.floor(N) and N <= _MAX_INT_POWER:
@@ -375,7 +453,12 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     n = stress.shape[0]
     if kint == 0:
         for p in range(n):
-            if which < 0 or mat_ids[p] == which:
+            if which >= 0 and mat_ids[p] != which:
+                continue
+            if continuous:
+                _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E,
+                                       nu, cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+            else:
                 _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps,
                             mu, isy, N, kint, xfloor, c, h, phi_quiet2)
         return
@@ -400,16 +483,22 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
             fast[q] = max(abs(de[p, 0]), abs(de[p, 1]), abs(de[p, 2])) <= h
         # the loop with constant formulation flags, so that no branch on them is left in it
         if plane_strain:
-            _rk2_block(X, Y, nq, True, E, nu, cps, mu, isy, kint, xfloor, c)
+            _rk2_block(X, Y, nq, True, False, E, nu, cps, mu, isy, kint, xfloor, c)
+        elif continuous:   # the implicit update's loading test (use_integrator)
+            _rk2_block(X, Y, nq, False, True, E, nu, cps, mu, isy, kint, xfloor, c)
         else:
-            _rk2_block(X, Y, nq, False, E, nu, cps, mu, isy, kint, xfloor, c)
+            _rk2_block(X, Y, nq, False, False, E, nu, cps, mu, isy, kint, xfloor, c)
         for q in range(nq):
             p = p0 + q
             if which >= 0 and mat_ids[p] != which:
                 continue
             if not fast[q]:
-                _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu, cps,
-                            mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+                if continuous:
+                    _substepped_continuous(p, stress, de, back, eps_p, eps_eq, work, plane_strain,
+                                           E, nu, cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
+                else:
+                    _substepped(p, stress, de, back, eps_p, eps_eq, work, plane_strain, E, nu,
+                                cps, mu, isy, N, kint, xfloor, c, h, phi_quiet2)
                 continue
             for k in range(4):
                 stress[p, k] = X[k, q] + Y[k, q]
@@ -467,6 +556,58 @@ def _smooth_tangent(D, stress, back, de, params, plane_strain, mat_ids, which):
                 D[p, a, b] -= f * dm[a] * dm[b]
 
 
+#: the strain perturbation of the consistent tangent's differences, in yield strains: far above
+#: round-off (the stress differences are then 1e-7 of sigma_y, whose rounding is 1e-16 of it)
+#: and far below the strains over which the update's derivative changes (a sub-step, 0.1 eps_y)
+_TANGENT_PROBE = 1e-6
+
+
+@nb.njit(cache=True)
+def _consistent_tangent(D, stress0, back0, de, params, plane_strain, mat_ids, which):
+    """The derivative of the implicit update (``_substepped_continuous`` from the step's start
+    ``stress0``, ``back0`` by the increment ``de``) with respect to ``de``, by forward
+    differences of the update itself: the tangent Newton's method converges with (Simo &
+    Taylor 1985; by differences as Miehe 1996 and Perez-Foguet et al. 2000). Points whose update
+    is elastic get the elastic matrix (the update is then exactly D de). Not symmetric in
+    general (the loading test and the sub-steps): an LU factorisation takes it."""
+    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
+    kint = 0
+    if N == math.floor(N) and N <= _MAX_INT_POWER:
+        kint = int(N)
+    xfloor = _power_floor(kint)
+    c = alpha * E / (1.0 - alpha)
+    h = sy / E * min(0.1, 1.0 / N)
+    cps = E / (1.0 - nu * nu)
+    mu = E / (2.0 * (1.0 + nu))
+    isy = 1.0 / sy
+    phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2
+    probe = _TANGENT_PROBE * sy / E
+    s1 = np.empty((1, 4))
+    b1 = np.empty((1, 4))
+    d1 = np.empty((1, 3))
+    for p in range(D.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        elastic_matrix(E, nu, plane_strain, D, p)
+        for k in range(4):
+            s1[0, k] = stress0[p, k]
+            b1[0, k] = back0[p, k]
+        for k in range(3):
+            d1[0, k] = de[p, k]
+        base = _continuous(0, s1, d1, b1, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                           phi_quiet2)
+        if not base[13]:
+            continue   # elastic: D
+        for j in range(3):
+            d1[0, j] = de[p, j] + probe
+            r = _continuous(0, s1, d1, b1, plane_strain, E, nu, cps, mu, isy, N, kint, xfloor, c, h,
+                            phi_quiet2)
+            d1[0, j] = de[p, j]
+            D[p, 0, j] = (r[0] - base[0]) / probe   # (a tuple of mixed types: no index loop)
+            D[p, 1, j] = (r[1] - base[1]) / probe
+            D[p, 2, j] = (r[2] - base[2]) / probe
+
+
 class SmoothVonMises(KinematicHardening):
     """The paper's smooth von Mises plasticity with Ziegler kinematic hardening.
 
@@ -519,11 +660,26 @@ class SmoothVonMises(KinematicHardening):
             Update only particles with ``mat_ids == which``; -1 updates all.
         """
         _update_smooth(stress, de, state["back_stress"], state["eps_p"], state["eps_p_eq"],
-                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which)
+                       state["plastic_work"], self.params, self.plane_strain, mat_ids, which,
+                       self.continuous_in_increment)
+
+    #: the update as a continuous function of the increment (``_substepped_continuous``): set
+    #: for the implicit integrator, whose Newton iterations need it (use_integrator)
+    continuous_in_increment = False
+
+    def use_integrator(self, name):
+        self.continuous_in_increment = name == "implicit"
 
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
-        """The paper's tangent modulus E_t at the end of the increment (``_smooth_tangent``):
-        the rate form's own stiffness, not the derivative of the sub-stepped update, which it
-        approaches as the increment shrinks (Newton then converges fast but not quadratically
-        where the points yield)."""
+        """The derivative of the implicit update (``_consistent_tangent``, by differences), with
+        which Newton converges where the points yield; as the increment shrinks it tends to the
+        paper's tangent modulus E_t (``_smooth_tangent``, tests/unit/test_smooth_continuous.py).
+        The rate form's E_t at the end of the increment, which the first implicit slice used,
+        is not that derivative: Newton converged linearly with it and the Northridge record
+        needed step halvings wherever the frame yielded. With the fracture option the points
+        that soften take E_t (the fracture passes are not in the differenced update)."""
+        if self.continuous_in_increment and self.fracture is None:
+            _consistent_tangent(D, stress0, state0["back_stress"], de, self.params, self.plane_strain,
+                                mat_ids, which)
+            return
         _smooth_tangent(D, stress1, state1["back_stress"], de, self.params, self.plane_strain, mat_ids, which)
