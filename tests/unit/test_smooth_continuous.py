@@ -195,3 +195,18 @@ def test_consistent_tangent_tends_to_the_papers_modulus(plane_strain):
     for p in range(len(De)):
         sv.elastic_matrix(E, NU, plane_strain, De, p)
     assert np.abs(Dr - De).max() > 0.1 * E
+
+
+@pytest.mark.parametrize("plane_strain", [False, True])
+def test_consistent_tangent_of_a_stress_free_start(plane_strain):
+    """A point with no stress yet (every point of a run's first step, e.g. gravity brought to
+    equilibrium) and an elastic increment: the elastic matrix, no 0/0 from the flow direction
+    (the model evaluates it and discards it there; it raised ZeroDivisionError once)."""
+    n = 3
+    zero = np.zeros((n, 4))
+    de = np.array([[1e-5, -3e-6, 2e-6], [0.0, 0.0, 0.0], [-2e-5, 1e-5, 0.0]])
+    D = _tangent(zero, zero, de, plane_strain, True)
+    De = np.zeros_like(D)
+    for p in range(n):
+        sv.elastic_matrix(E, NU, plane_strain, De, p)
+    assert np.array_equal(D, De)

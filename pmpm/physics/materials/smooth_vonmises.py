@@ -562,7 +562,8 @@ def _smooth_tangent(D, stress, back, de, params, plane_strain, mat_ids, which):
 _TANGENT_PROBE = 1e-6
 
 
-@nb.njit(cache=True)
+# error_model="numpy": smooth_rate divides 0/0 at a stress-free point and discards the result
+@nb.njit(cache=True, error_model="numpy")
 def _consistent_tangent(D, stress0, back0, de, params, plane_strain, mat_ids, which):
     """The derivative of the implicit update (``_substepped_continuous`` from the step's start
     ``stress0``, ``back0`` by the increment ``de``) with respect to ``de``, by forward
