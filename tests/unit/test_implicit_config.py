@@ -75,6 +75,8 @@ CASES = {
                            "solver.integrator: must be one of explicit, implicit"),
     "negative-tolerance": (_append("[solver.implicit]\nresidual_tolerance = -1e-8"), [],
                            "solver.implicit.residual_tolerance: must be > 0"),
+    "unknown-newton-variant": (_append('[solver.implicit]\nnewton = "quasi"'), [],
+                               "solver.implicit.newton: must be one of full, modified"),
     "unknown-implicit-key": (_append("[solver.implicit]\ntolerance = 1e-8"), [], "solver.implicit.tolerance: unknown key"),
     "unknown-petsc-option": (_append("[solver.petsc]\nksp_tpye = \"cg\""), [],
                              "solver.petsc.ksp_tpye: PETSc did not use this option"),

@@ -154,6 +154,8 @@ class LinearSolver:
         self._sizes = None
         self._pattern = None
         self.iterations = 0
+        #: (active, held) node masks of the step whose tangent the operator holds (GridProblem)
+        self.unknowns = None
 
     def _has_mumps(self):
         """Whether the PETSc library was configured with MUMPS (Debian's is)."""

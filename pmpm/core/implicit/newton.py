@@ -13,12 +13,13 @@ factorisation) and the force scale is the norm of the internal and external forc
 step's start (so that a step that starts in equilibrium does not chase round-off).
 
 Tangent updates (``newton``): ``"full"`` (the default) assembles and factors the tangent at
-every iteration; ``"modified"`` keeps the step's first factorisation while each iteration cuts
-the residual at least by ``REFACTOR_RATE`` and refactors at the iterate where one did not (a
+every iteration; ``"modified"`` keeps the factorisation it has, also an earlier step's where
+the unknowns are the same (``problem.factorisation_fits``), while each iteration cuts the
+residual at least by ``REFACTOR_RATE``, and refactors at the iterate where one did not (a
 back-substitution and a residual cost a fraction of an assembly and a factorisation: the
-factorisation is most of an iteration on the frames, docs/implicit.md). With the smooth
-model's rate tangent, which is not its update's derivative, full Newton converges linearly
-where the points yield anyway, so the modified iterations lose little rate.
+factorisation is most of an iteration on the frames, docs/implicit.md). Where the structure
+stays elastic the tangent hardly changes from step to step, and most steps then factor
+nothing; where it yields the rate test brings the factorisations back.
 
 Line search (``line_search = true``; off by default): the step length s is halved while the
 energy slope along the correction does not shrink, |du . R(u + s du)| > |du . R(u)|
@@ -72,7 +73,7 @@ def newton(problem, u, opts, history=None):
     scale = max(norm, problem.force_scale)
     energy0 = None
     modified = opts.get("newton", "full") == "modified"
-    refactor = True
+    refactor = not (modified and problem.factorisation_fits())
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):
             raise NewtonFailed(f"residual not finite at iteration {k}")

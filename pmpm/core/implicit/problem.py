@@ -183,7 +183,17 @@ class GridProblem:
                                    rows, indptr, cols, vals)
         self.linear.set_operator(d.n_owned, d.start, rows[:nrows], indptr[:nrows + 1], cols[:nnz],
                                  vals[:nnz], d.diag_nnz, d.off_nnz)
+        self.linear.unknowns = (d.active.copy(), d.held.copy())
         self.factorisations += 1
+
+    def factorisation_fits(self):
+        """Whether the linear solver holds a factorisation (of an earlier step's tangent) whose
+        unknowns are this step's: the same active and held node components on every rank (a
+        modified Newton may start from it; collective)."""
+        key = self.linear.unknowns
+        same = key is not None and key[0].shape == self.dofs.active.shape and \
+            np.array_equal(key[0], self.dofs.active) and np.array_equal(key[1], self.dofs.held)
+        return self.s.decomp.allreduce_sum(0 if same else 1) == 0
 
     def _diagonal(self, Kb):
         """What the owned nodes' diagonals receive: the mass term m / (beta dt^2), and on a held
