@@ -221,13 +221,21 @@ def _point_update(sig, back, de, C, a, V, Vinv, sy, c):
 
 @nb.njit(cache=True)
 def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thickness, eta,
-           C, P, a, V, Vinv, sy, c, dN, Ng, stop_at_initiation):
+           C, P, a, V, Vinv, sy, c, dN, Ng, stop_at_initiation, snap_times):
     """Central differences to ``end_time`` (module doc). Returns (window ends, mean reaction,
-    initiation time or -1, its point x, y, steps)."""
+    initiation time or -1, its point x, y, steps, and at each of ``snap_times`` the Gauss points'
+    positions, equivalent plastic strains, damages and stresses)."""
     n, m = x.shape[0], elems.shape[0]
     sig = np.zeros((m, 4, 3))
     back = np.zeros((m, 4, 3))
     damage = np.zeros((m, 4))
+    eq = np.zeros((m, 4))
+    ksnap = snap_times.shape[0]
+    snap_x = np.zeros((ksnap, m, 4, 2))
+    snap_eq = np.zeros((ksnap, m, 4))
+    snap_d = np.zeros((ksnap, m, 4))
+    snap_s = np.zeros((ksnap, m, 4, 3))
+    isnap = 0
     fint = np.zeros((n, 2))
     nsamples = int(end_time / sample) + 2
     times = np.zeros(nsamples)
@@ -273,6 +281,7 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
                 de[0], de[1], de[2] = dt * lxx, dt * lyy, dt * (lxy + lyx)
                 dl = _point_update(sig[e, g], back[e, g], de, C, a, V, Vinv, sy, c)
                 s = sig[e, g]
+                eq[e, g] += dl
                 if dl > 0.0:
                     seq = math.sqrt(max(s[0] * s[0] - s[0] * s[1] + s[1] * s[1] + 3.0 * s[2] * s[2], 0.0))
                     T = (s[0] + s[1]) / (3.0 * seq) if seq > 0.0 else 0.0
@@ -306,14 +315,25 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
             ns += 1
             acc, acc_t = 0.0, 0.0
             next_sample += sample
+        while isnap < ksnap and t >= snap_times[isnap] - 1e-15:
+            for e in range(m):
+                for g in range(4):
+                    for k in range(4):
+                        snap_x[isnap, e, g, 0] += Ng[g, k] * x[elems[e, k], 0]
+                        snap_x[isnap, e, g, 1] += Ng[g, k] * x[elems[e, k], 1]
+                    snap_eq[isnap, e, g] = eq[e, g]
+                    snap_d[isnap, e, g] = damage[e, g]
+                    for k in range(3):
+                        snap_s[isnap, e, g, k] = sig[e, g, k]
+            isnap += 1
         if failed_now:
             initiation = t
             if stop_at_initiation:
                 break
-    return times[:ns], forces[:ns], initiation, wx, wy, steps
+    return times[:ns], forces[:ns], initiation, wx, wy, steps, snap_x, snap_eq, snap_d, snap_s
 
 
-def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiation=True):
+def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiation=True, snapshots=()):
     """Pull the specimen meshed at element size ``h``.
 
     Returns a dict: ``time`` (window ends, s), ``force`` (mean reaction Rx of the held face over
@@ -331,13 +351,15 @@ def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiat
     c = math.sqrt(sp["E"] / (rho * (1 - sp["nu"] ** 2)))
     edges = np.linalg.norm(nodes[elems] - nodes[np.roll(elems, -1, axis=1)], axis=2)
     dt = cfl * edges.min() / c
-    times, forces, initiation, wx, wy, steps = _march(
+    snap_times = np.sort(np.asarray(snapshots, dtype=np.float64).reshape(-1))
+    times, forces, initiation, wx, wy, steps, sx, seq, sd, ss = _march(
         nodes.copy(), np.zeros_like(nodes), mass, elems.astype(np.int64), held, pulled, float(sp["pull"]), dt,
         float(end_time), float(sample), float(sp["thickness"]), float(sp["eta"]), mat.C, mat.P, mat.a, mat.V,
         mat.Vinv, float(sp["yield_stress"]), float(mat.c), np.ascontiguousarray(_DN), np.ascontiguousarray(_N),
-        stop_at_initiation)
+        stop_at_initiation, snap_times)
     return {"time": times, "force": forces, "initiation": initiation if initiation >= 0 else None,
-            "where": (wx, wy) if initiation >= 0 else None, "steps": steps, "dt": dt, "elements": len(elems)}
+            "where": (wx, wy) if initiation >= 0 else None, "steps": steps, "dt": dt, "elements": len(elems),
+            "snapshots": {"time": snap_times, "x": sx, "eps_p_eq": seq, "damage": sd, "stress": ss}}
 
 
 if __name__ == "__main__":
