@@ -44,6 +44,16 @@ def fe_module():
     return verification_models.load("notched_specimen_fe_model")
 
 
+def fracture_table(sp):
+    """The scene's ``[materials.steel.fracture]`` of the specimen ``sp``: the nonlocal criterion
+    when ``sp`` has a characteristic length (None: the local one), the crack band length when it
+    has a ``band_cells`` (the release length in cells; None: the default, the cell size)."""
+    table = {"model": "void_growth", "eta": sp["eta"], "fracture_energy": sp["fracture_energy"]}
+    if sp.get("characteristic_length"):
+        table["characteristic_length"] = sp["characteristic_length"]
+    return table
+
+
 def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
     """The specimen as a pmpm scene (a TOML dict) at cell size ``h`` (m)."""
     sp = sp or fe_module().SPECIMEN
@@ -59,7 +69,7 @@ def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
         "materials": {"steel": {
             "type": "bilinear_vonmises", "E": sp["E"], "nu": sp["nu"], "density": sp["density"],
             "yield_stress": sp["yield_stress"], "hardening": sp["hardening"],
-            "fracture": {"model": "void_growth", "eta": sp["eta"], "fracture_energy": sp["fracture_energy"]}}},
+            "fracture": fracture_table(sp)}},
         "bodies": [{"name": "plate", "shape": "polygon", "material": "steel", "thickness": sp["thickness"],
                     "vertices": fe_module().polygon(sp)}],
         "boundary": [
