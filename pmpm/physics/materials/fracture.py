@@ -8,7 +8,9 @@ the scene by a sub-table of the material::
     model = "void_growth"      # Kanvinde & Deierlein's void growth model (docs/fracture.md)
     eta = 1.0                  # fracture strain at zero triaxiality (illustrative: docs/fracture.md)
     fracture_energy = 1.0e5    # G_f, J/m^2: energy per unit crack area the release dissipates
-    length = 0.01              # l_c, m: width of the crack band (default: the grid's cell size)
+    length = 0.01              # l_c, m: width of the crack band (default: band_cells x the cell size)
+    band_cells = 1.5           # or the band's width in cells (default 1; not with length)
+    characteristic_length = 0.004   # l*, m: the criterion averaged over l* (default: at each point)
 
 Damage (docs/fracture.md has the sources and the choice of model)
     dD = d(eps_p_eq) / eps_f(T),  eps_f(T) = eta exp(-1.5 T),  T = sigma_m / sigma_eq
@@ -145,6 +147,11 @@ def read_fracture(table, key):
     settings["fracture_energy"] = _positive(table, key, "fracture_energy")
     settings["length"] = _positive(table, key, "length", required=False)
     settings["characteristic_length"] = _positive(table, key, "characteristic_length", required=False)
+    # the crack band's width in cells, for the default l_c (band_cells x the cell size)
+    band = _positive(table, key, "band_cells", required=False)
+    if band is not None and settings["length"] is not None:
+        raise ConfigError(f"{key}.band_cells", "give either length (m) or band_cells (cells), not both")
+    settings["band_cells"] = 1.0 if band is None else band
     if table:
         raise ConfigError(f"{key}.{sorted(table)[0]}", "unknown key for this fracture model")
     return settings
