@@ -17,6 +17,8 @@ studies/fracture_specimen.py at 10/3 mm with a characteristic length of 4 mm, on
 first fracture time, fracture energy and damage field to 1e-10: the averages' passes sum their
 halos like the transfer's, so a pass whose halo sum were left out (each rank's partial nodal
 sums) changes the averages at the slab boundary by O(1) and the failures with them.
+Planted bug: the passes' halo sum left out (fracture_nonlocal.NonlocalFracture._smooth) -> on
+2 ranks the fracture work differs from the serial run's by 10%: fails.
 Planted bug: FractureRecord.summary without its allgather (each rank its own first fractures)
 -> on 2 ranks rank 0 does not hold the weak band and the run's summary misses it: fails.
 """
