@@ -1,5 +1,5 @@
 """The nonlocal ductile fracture criterion: a point fails when the void growth index averaged
-over the material's characteristic length reaches 1 (docs/fracture.md, "Nonlocal criterion").
+over the material's characteristic length reaches 1 (docs/fracture.md, "The nonlocal criterion").
 
 An effect (pmpm.core.effects) that exists only when a material's ``[materials.<label>.fracture]``
 names a ``characteristic_length`` l*. Kanvinde and Deierlein's void growth and SMCS criteria
@@ -10,21 +10,22 @@ particles' sub-cell centres in pmpm: docs/fracture.md measures it), so the displ
 initiation does not converge under refinement. Averaged over l* it does, once the cell is
 below l*.
 
-The average is the grid's own smoothing, applied as many times as l* asks. One pass
-particles -> grid -> particles,
+The average is a smoothing on the grid, applied as many times as l* asks. One pass
+particles -> grid -> particles with the linear hat functions N_j of the grid's nodes (whatever
+basis the run's transfer uses: the hats reach the fewest nodes and spread the least per pass),
 
-    u_p <- sum_j S_jp (sum_q S_jq m_q u_q) / (sum_q S_jq m_q),
+    u_p <- sum_j N_j(x_p) (sum_q N_j(x_q) m_q u_q) / (sum_q N_j(x_q) m_q),
 
-is a mass-weighted average with a kernel of variance 2 var(N) = K h^2 / 6 per axis (N the
-B-spline of K nodes per axis, variance K h^2 / 12; the kernel is the spline convolved with
-itself), normalised at free surfaces by the nodal mass (no weight outside the material). The
-criterion's kernel has the variance of a uniform average over a segment of length l*,
+is a mass-weighted average over the material's particles whose kernel has the variance
+2 var(N) = h^2 / 3 per axis (the hat convolved with itself; plus s^2 / 6 on a particle lattice
+of spacing s), normalised at free surfaces by the nodal mass (no weight outside the material).
+The criterion's kernel has the variance of a uniform average over a segment of length l*,
 l*^2 / 12 per axis: k = floor(r) passes and a blend (1 - f) P^k u + f P^(k+1) u, r = k + f =
-l*^2 / (2 K h^2), give exactly that variance at any cell size (the kernels of repeated passes
+l*^2 / (4 h^2), give exactly that variance at any cell size (the kernels of repeated passes
 tend to a Gaussian; below one pass, k = 0, the blend mixes the point's own index with one
-pass). Each pass is one scatter, one halo sum and one gather: the decomposition's halo of 2
-node columns is all it needs, however wide l* is, and the passes are the same on any number
-of ranks (tests/mpi/test_fracture_mpi.py).
+pass: l* is then not resolved). Each pass is one scatter, one halo sum and one gather: the
+decomposition's halo of 2 node columns is all it needs, however wide l* is, and the passes
+are the same on any number of ranks (tests/mpi/test_fracture_mpi.py).
 
 When: at the start of each step's force pass (hook ``scatter_forces``: the particles are where
 the step's grid window holds them, after the migration), and only once some point of the
