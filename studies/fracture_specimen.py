@@ -7,12 +7,14 @@ same specimen is built here as a pmpm scene (:func:`scene`: the plate as a polyg
 have 64 chords, the supports on the body's faces, the held face's reaction recorded). For each
 size h (mm; the MPM cell and the FE element edge) the study prints
 
-* the displacement of the pulled face at fracture initiation (the first point whose damage
-  reaches 1) from both models and their difference;
+* the displacement of the pulled face at fracture initiation (the first point that fails: with
+  the specimen's characteristic length, where the void growth index averaged over l* reaches 1,
+  docs/fracture.md) from both models and their difference;
 * pmpm's refinement (second table): the displacement at initiation and its change between
   sizes, and the fracture energy dissipated by ``--end-time`` (the crack has then run through
   the ligament: the force left is printed) over G_f times the ligament's area, which the
-  Hillerborg regularisation (l_c = h) should keep independent of h;
+  Hillerborg regularisation (l_c = band_cells x h, :data:`BAND_CELLS`) should keep independent
+  of h, and the crack band's width in cells;
 * the force-displacement curves to initiation: the held face's reaction averaged over windows
   of ``--window`` seconds (the elastic waves of the sudden pull ring with a period of 2 L / c,
   about 40 us: the window averages them out the same way in both), its largest difference
@@ -22,7 +24,11 @@ then one JSON line. Run::
 
     python -m studies.fracture_specimen --sizes 3.333 2 1
 
-(the 1 mm MPM run takes a few minutes on this machine; run it under ``nice -n 10``). Nothing
+``--local`` runs the specimen as before the nonlocal criterion (local, l_c = h); ``--profile
+T1 T2 ..`` prints instead the diagnosis of the local initiation's refinement (the largest
+eps_p_eq by depth below the notch root, both models, at those times in ms).
+
+(the 1 mm MPM run takes 5 to 15 minutes on this machine; run it under ``nice -n 10``). Nothing
 is written. tests/verification/test_fracture_specimen.py runs the two coarsest sizes in CI.
 """
 import argparse
