@@ -231,8 +231,12 @@ def main(argv=None):
     ap.add_argument("--local", action="store_true",
                     help="the local criterion (no characteristic length) and l_c = h: the specimen before "
                          "the nonlocal criterion")
+    ap.add_argument("--characteristic-length", type=float, metavar="MM",
+                    help="the nonlocal criterion's l* (mm) instead of the specimen's 4 mm")
     args = ap.parse_args(argv)
     sp = dict(fe_module().SPECIMEN)
+    if args.characteristic_length:
+        sp["characteristic_length"] = args.characteristic_length * 1e-3
     if args.local:
         sp["characteristic_length"] = None
         sp["band_cells"] = None
