@@ -35,7 +35,8 @@ What is asserted, and where the bounds come from:
   criterion and l_c = h, the rows of ``python -m studies.fracture_specimen --local --sizes
   3.3333333333 2`` given to test_refinement): initiation moves by -22.8% against the FE model's
   +5.3% (relative to the finer value), and W / (G_f A) = 1.74 at 2 mm.
-Planted bugs that the test catches (checked once, then restored): the FE model's damage with
+Planted bugs that the test caught (checked by the second session with the local criterion, not
+rechecked with the nonlocal one): the FE model's damage with
 exp(-1.5 T) replaced by exp(+1.5 T) (initiation far later: the displacement check fails); pmpm's
 bilinear hardening read as twice its value (forces above the bound).
 """
