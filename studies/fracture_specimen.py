@@ -7,12 +7,14 @@ same specimen is built here as a pmpm scene (:func:`scene`: the plate as a polyg
 have 64 chords, the supports on the body's faces, the held face's reaction recorded). For each
 size h (mm; the MPM cell and the FE element edge) the study prints
 
-* the displacement of the pulled face at fracture initiation (the first point whose damage
-  reaches 1) from both models and their difference;
+* the displacement of the pulled face at fracture initiation (the first point that fails: with
+  the specimen's characteristic length, where the void growth index averaged over l* reaches 1,
+  docs/fracture.md) from both models and their difference;
 * pmpm's refinement (second table): the displacement at initiation and its change between
   sizes, and the fracture energy dissipated by ``--end-time`` (the crack has then run through
   the ligament: the force left is printed) over G_f times the ligament's area, which the
-  Hillerborg regularisation (l_c = h) should keep independent of h;
+  Hillerborg regularisation (l_c = band_cells x h, :data:`BAND_CELLS`) should keep independent
+  of h, and the crack band's width in cells;
 * the force-displacement curves to initiation: the held face's reaction averaged over windows
   of ``--window`` seconds (the elastic waves of the sudden pull ring with a period of 2 L / c,
   about 40 us: the window averages them out the same way in both), its largest difference
@@ -22,7 +24,11 @@ then one JSON line. Run::
 
     python -m studies.fracture_specimen --sizes 3.333 2 1
 
-(the 1 mm MPM run takes a few minutes on this machine; run it under ``nice -n 10``). Nothing
+``--local`` runs the specimen as before the nonlocal criterion (local, l_c = h); ``--profile
+T1 T2 ..`` prints instead the diagnosis of the local initiation's refinement (the largest
+eps_p_eq by depth below the notch root, both models, at those times in ms).
+
+(the 1 mm MPM run takes 5 to 15 minutes on this machine; run it under ``nice -n 10``). Nothing
 is written. tests/verification/test_fracture_specimen.py runs the two coarsest sizes in CI.
 """
 import argparse
@@ -44,6 +50,26 @@ def fe_module():
     return verification_models.load("notched_specimen_fe_model")
 
 
+#: the crack band's width in cells that the specimen's release length takes (``band_cells``):
+#: the width the crack runs with in this specimen with cubic B-splines and the nonlocal
+#: criterion, measured by this study (the table's "band width" column; docs/fracture.md)
+BAND_CELLS = 1.3
+
+
+def fracture_table(sp):
+    """The scene's ``[materials.steel.fracture]`` of the specimen ``sp``: the nonlocal criterion
+    when ``sp`` has a characteristic length (None: the local one), the crack band length when it
+    has a ``band_cells`` (the release length in cells; absent: :data:`BAND_CELLS`; None: the
+    default of pmpm, one cell)."""
+    table = {"model": "void_growth", "eta": sp["eta"], "fracture_energy": sp["fracture_energy"]}
+    if sp.get("characteristic_length"):
+        table["characteristic_length"] = sp["characteristic_length"]
+    band = sp.get("band_cells", BAND_CELLS)
+    if band:
+        table["band_cells"] = band
+    return table
+
+
 def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
     """The specimen as a pmpm scene (a TOML dict) at cell size ``h`` (m)."""
     sp = sp or fe_module().SPECIMEN
@@ -59,7 +85,7 @@ def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
         "materials": {"steel": {
             "type": "bilinear_vonmises", "E": sp["E"], "nu": sp["nu"], "density": sp["density"],
             "yield_stress": sp["yield_stress"], "hardening": sp["hardening"],
-            "fracture": {"model": "void_growth", "eta": sp["eta"], "fracture_energy": sp["fracture_energy"]}}},
+            "fracture": fracture_table(sp)}},
         "bodies": [{"name": "plate", "shape": "polygon", "material": "steel", "thickness": sp["thickness"],
                     "vertices": fe_module().polygon(sp)}],
         "boundary": [
@@ -119,24 +145,66 @@ def compare(h, window=1.0e-4, end_time=2.2e-3, sp=None):
     return {"h_mm": h * 1e3, "fracture_work_J": float(r.energies["fracture_work"][-1]),
             "fracture_work_over_GfA": float(r.energies["fracture_work"][-1]) / gf_area,
             "failed_points": int(failed.sum()),
+            # the crack band's mean width in cells: the failed particles' area (h^2 / 4 each at
+            # 2 particles per cell) over the ligament's length
+            "band_cells": float(failed.sum()) * (h * h / 4) / (ligament * h),
             "end_force_over_peak": float(abs(a["force"][-10:].mean())) / peak, "u_init_mpm_mm": ua * 1e3, "u_init_fe_mm": ub * 1e3,
             "u_init_diff": (ua - ub) / ub, "force_max_diff": float(np.nanmax(np.abs(fa - fb)) / peak),
             "force_peak_fe_kN": peak / 1e3, "force_peak_mpm_kN": float(np.nanmax(np.abs(fa))) / 1e3,
             "windows": len(ta), "wall_mpm_s": a["wall"], "wall_fe_s": b["wall"],
+            "fe_where": b["where"], "failed_x0": r.frames["x"][0][failed].tolist(),
             "curve": {"u_mm": (sp["pull"] * ta * 1e3).tolist(), "mpm_kN": (fa / 1e3).tolist(),
                       "fe_kN": (fb / 1e3).tolist()}}
+
+
+def _depth_bins(x, eq, sp, bins):
+    """The largest eps_p_eq in each depth bin below the lower notch's arc, within 20 degrees
+    of its root (x: current positions)."""
+    xc = 0.5 * sp["length"]
+    depth = np.hypot(x[:, 0] - xc, x[:, 1]) - sp["radius"]
+    near_root = (np.abs(np.degrees(np.arctan2(x[:, 0] - xc, x[:, 1]))) < 20.0) & (x[:, 1] < 0.5 * sp["width"])
+    out = []
+    for lo, hi in zip(bins[:-1], bins[1:]):
+        sel = near_root & (depth >= lo) & (depth < hi)
+        out.append(float(eq[sel].max()) if sel.any() else math.nan)
+    return out
+
+
+def surface_profile(h, times, sp=None, bins=(0.0, 0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3, 8.0e-3)):
+    """The diagnosis of the initiation's refinement: the largest equivalent plastic strain by
+    depth below the notch arc near its root, pmpm's particles and the FE model's Gauss points,
+    at the given ``times`` (s), both with the local criterion's fields (no point has failed
+    before its first initiation). Returns rows (t, model, [max eps_p_eq per bin])."""
+    sp = dict(sp or fe_module().SPECIMEN)
+    end = max(times) + 1e-9
+    sc = scene(h, end, sp)
+    sc["output"]["fields"] = ["x", "eps_p_eq"]
+    sc["output"]["interval"] = min(times)
+    r = pmpm_run(sc, dataframes=False)
+    rows = []
+    ft = np.asarray(r.frame_times)
+    model = fe_module()
+    snaps = model.run(h, sp, end_time=end, stop_at_initiation=False, snapshots=times)["snapshots"]
+    for k, t in enumerate(times):
+        i = int(np.argmin(np.abs(ft - t)))
+        rows.append((float(ft[i]), "pmpm", _depth_bins(np.asarray(r.frames["x"][i]),
+                                                       np.asarray(r.frames["eps_p_eq"][i]), sp, bins)))
+        rows.append((float(snaps["time"][k]), "FE", _depth_bins(snaps["x"][k].reshape(-1, 2),
+                                                                 snaps["eps_p_eq"][k].ravel(), sp, bins)))
+    return rows
 
 
 def refinement_table(rows):
     """pmpm's own refinement: initiation, its change from the previous size, the fracture
     energy dissipated by the end (over G_f times the ligament's area) and the force left."""
-    lines = ["| h (mm) | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | force at the end / FE peak |",
-             "| ---: | ---: | ---: | ---: | ---: | ---: |"]
+    lines = ["| h (mm) | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | "
+             "band width (cells) | force at the end / FE peak |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     prev = None
     for r in rows:
         change = "" if prev is None else f"{100 * (r['u_init_mpm_mm'] - prev) / prev:+.1f}%"
         lines.append(f"| {r['h_mm']:.3g} | {r['u_init_mpm_mm']:.4f} | {change} | {r['fracture_work_J']:.3f} | "
-                     f"{r['fracture_work_over_GfA']:.3f} | {r['end_force_over_peak']:.3f} |")
+                     f"{r['fracture_work_over_GfA']:.3f} | {r['band_cells']:.2f} | {r['end_force_over_peak']:.3f} |")
         prev = r["u_init_mpm_mm"]
     return "\n".join(lines)
 
@@ -157,10 +225,32 @@ def main(argv=None):
     ap.add_argument("--window", type=float, default=1.0e-4, help="force averaging window (s)")
     ap.add_argument("--end-time", type=float, default=2.2e-3, help="pmpm's end time (s): past the separation")
     ap.add_argument("--curves", action="store_true", help="print the windowed force-displacement curves")
+    ap.add_argument("--profile", type=float, nargs="+", metavar="T_MS",
+                    help="instead: the largest eps_p_eq by depth below the notch root at these times (ms), "
+                         "pmpm and FE, local criterion, at each of --sizes")
+    ap.add_argument("--local", action="store_true",
+                    help="the local criterion (no characteristic length) and l_c = h: the specimen before "
+                         "the nonlocal criterion")
+    ap.add_argument("--characteristic-length", type=float, metavar="MM",
+                    help="the nonlocal criterion's l* (mm) instead of the specimen's 4 mm")
     args = ap.parse_args(argv)
+    sp = dict(fe_module().SPECIMEN)
+    if args.characteristic_length:
+        sp["characteristic_length"] = args.characteristic_length * 1e-3
+    if args.local:
+        sp["characteristic_length"] = None
+        sp["band_cells"] = None
+    if args.profile:
+        print("| h (mm) | t (ms) | model | depth 0-0.5 mm | 0.5-1 | 1-2 | 2-4 | 4-8 |")
+        print("| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |")
+        for size in args.sizes:
+            local = dict(sp, characteristic_length=None)
+            for t, name, vals in surface_profile(size * 1e-3, [v * 1e-3 for v in args.profile], local):
+                print(f"| {size:g} | {t * 1e3:.2f} | {name} | " + " | ".join(f"{v:.4f}" for v in vals) + " |")
+        return
     rows = []
     for size in args.sizes:
-        row = compare(size * 1e-3, args.window, args.end_time)
+        row = compare(size * 1e-3, args.window, args.end_time, sp)
         rows.append(row)
         if args.curves:
             c = row["curve"]
@@ -170,7 +260,8 @@ def main(argv=None):
     print(markdown_table(rows))
     print()
     print(refinement_table(rows))
-    print(json.dumps({"fracture_specimen": [{k: v for k, v in r.items() if k != "curve"} for r in rows]}))
+    print(json.dumps({"fracture_specimen": [{k: v for k, v in r.items() if k not in ("curve", "failed_x0")}
+                                            for r in rows]}))
 
 
 if __name__ == "__main__":

@@ -37,8 +37,10 @@ FIELDS = {
     "eps_p": ("1", "plastic strain epxx, epyy, gpxy (gpxy engineering: 2 epxy)"),
     "eps_p_eq": ("1", "equivalent plastic strain (sum of the plastic multiplier increments)"),
     "plastic_work": ("J/m^3", "plastic work per unit volume"),
-    "damage": ("1", "ductile damage D = sum d(eps_p_eq) / eps_f(triaxiality); 1: the point has "
-                    "failed (docs/fracture.md)"),
+    "damage": ("1", "ductile damage D = sum d(eps_p_eq) / eps_f(triaxiality) (with a characteristic "
+                    "length: its average over l*); 1: the point has failed (docs/fracture.md)"),
+    "vgm_index": ("1", "the point's own void growth index sum d(eps_p_eq) / eps_f(triaxiality), whose "
+                       "average over the characteristic length decides failure (docs/fracture.md)"),
     "fracture_work": ("J/m^3", "energy a failed point dissipated since its failure, per unit volume"),
     "crack_strain": ("1", "kappa (equivalent plastic strain since failure) and kappa_u (where the "
                           "tension is fully released) of a failed point"),

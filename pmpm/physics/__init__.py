@@ -15,4 +15,5 @@ from pmpm.physics import damping  # noqa: F401
 from pmpm.physics import rayleigh  # noqa: F401
 from pmpm.physics import events  # noqa: F401
 from pmpm.physics import supports  # noqa: F401
+from pmpm.physics import fracture_nonlocal  # noqa: F401
 from pmpm.physics import fracture_record  # noqa: F401

@@ -11,6 +11,14 @@ difference.
 Run under ``mpirun -n K python -m pytest tests/mpi/test_fracture_mpi.py`` (or as a script).
 With a reaction recorded, the structural tables' failed points per body (summed over the ranks
 in the recorder's one reduction) equal the serial counts.
+The nonlocal criterion (pmpm.physics.fracture_nonlocal): the round-notched specimen of
+studies/fracture_specimen.py at 10/3 mm with a characteristic length of 4 mm, on several ranks
+(slabs along x: on 2 ranks the slab boundary crosses the notches, at x = 53 mm), gives the serial
+first fracture time, fracture energy and damage field to 1e-10: the averages' passes sum their
+halos like the transfer's, so a pass whose halo sum were left out (each rank's partial nodal
+sums) changes the averages at the slab boundary by O(1) and the failures with them.
+Planted bug: the passes' halo sum left out (fracture_nonlocal.NonlocalFracture._smooth) -> on
+2 ranks the fracture work differs from the serial run's by 10%: fails.
 Planted bug: FractureRecord.summary without its allgather (each rank its own first fractures)
 -> on 2 ranks rank 0 does not hold the weak band and the run's summary misses it: fails.
 """
@@ -21,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pmpm.api import run
+from studies import fracture_specimen as study
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "unit"))
 from test_fracture_bar import bar_scene  # noqa: E402
@@ -62,7 +71,32 @@ def test_fracture_on_several_ranks_gives_the_serial_answer():
     assert ok, report
 
 
+def _run_specimen(c):
+    sp = dict(study.fe_module().SPECIMEN, characteristic_length=0.004)
+    r = run(study.scene(0.1 / 30, 1.8e-3, sp), dataframes=False, comm=c)
+    if c.Get_rank() != 0:
+        return None
+    return {"fracture_work": np.asarray(r.energies["fracture_work"]), "damage": np.asarray(r.frames["damage"][-1]),
+            "first": np.array([r.summary["first_fracture"]["plate"]])}
+
+
+def test_nonlocal_criterion_on_several_ranks_gives_the_serial_answer():
+    par = _run_specimen(comm)
+    ok, report = True, ""
+    if comm.rank == 0:
+        ref = _run_specimen(MPI.COMM_SELF)
+        for k in ("fracture_work", "damage", "first"):
+            err = np.abs(par[k] - ref[k]).max() / max(np.abs(ref[k]).max(), 1e-300)
+            if not err <= RTOL:
+                ok, report = False, report + f" {k}: relative difference {err:.3g}"
+        if not ref["fracture_work"][-1] > 0.0:
+            ok, report = False, report + " no fracture energy: the crack did not start"
+    ok = comm.allreduce(bool(ok), op=MPI.LAND)
+    assert ok, report
+
+
 if __name__ == "__main__":
     test_fracture_on_several_ranks_gives_the_serial_answer()
+    test_nonlocal_criterion_on_several_ranks_gives_the_serial_answer()
     if comm.rank == 0:
         print("ok")

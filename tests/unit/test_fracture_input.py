@@ -70,6 +70,13 @@ CASES = {
                         "materials.steel.fracture.length: must be > 0 (got -0.01)"),
     "zero-length": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\nlength = 0"),
                     "materials.steel.fracture.length: must be > 0 (got 0)"),
+    "negative-characteristic-length": (
+        _with("fracture_energy = 1e5", "fracture_energy = 1e5\ncharacteristic_length = -0.002"),
+        "materials.steel.fracture.characteristic_length: must be > 0 (got -0.002)"),
+    "zero-band-cells": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\nband_cells = 0"),
+                        "materials.steel.fracture.band_cells: must be > 0 (got 0)"),
+    "band-cells-and-length": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\nband_cells = 1.5\nlength = 0.01"),
+                              "materials.steel.fracture.band_cells: give either length"),
     "text-eta": (_with("eta = 2.6", 'eta = "2.6"'), "materials.steel.fracture.eta: must be a finite number"),
     "unknown-key": (_with("eta = 2.6", "eta = 2.6\nalpha = 2.6"), "materials.steel.fracture.alpha: unknown key"),
     "not-a-table": (lambda t: t.replace("[materials.steel.fracture]\nmodel = \"void_growth\"\neta = 2.6\n"

@@ -70,6 +70,41 @@ def test_g2p_mls_matches_reference(name):
     assert vmax == pytest.approx(np.sqrt((vp ** 2).sum(1)).max(), rel=1e-12) and bad == 0
 
 
+@pytest.mark.parametrize("name", ["quadratic", "cubic"])
+def test_mls_kernels_at_the_edge_of_the_plain_supports(name):
+    """The kernels take D_p^-1 as the B-spline's constant (4 or 3 / cells^2) where a support is
+    not boundary-modified and sum D_p elsewhere: particles on either side of that limit on
+    every edge (coordinates 0.5 and n - 0.5 cells quadratic, 1 and n - 1 cubic, and 1e-9
+    cells to the edge's side of them, where the weights are boundary-modified and D_p is not
+    the constant), against the NumPy twins (which always sum and invert D_p). Tolerances as
+    in the two tests above. Shown to fail: with the plain support taken to start one node
+    early (``c - 1 >= -1`` in pmpm.core.kernels.mls._inside) the forces differ by order one."""
+    order = ORDER[name]
+    limit = 0.5 if order == 2 else 1.0
+    cells = np.array(CELLS)
+    near = np.array([limit - 1e-9, limit, limit + 1e-9])
+    s = np.array([[a, 2.7] for a in near] + [[cells[0] - a, 3.1] for a in near]
+                 + [[4.3, a] for a in near] + [[5.6, cells[1] - a] for a in near])
+    p = _particles(n=len(s), seed=7)
+    p["x"] = ORIGIN + s * H
+    G = _grid()
+    p2g_mls(p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"], None, None, None, None,
+            G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name])
+    mass, mom, force = mls_p2g_reference(order, p["x"], p["m"], p["v"], p["C"], p["vol"], p["stress"],
+                                         np.zeros((len(s), 2)), ORIGIN, H, CELLS)
+    np.testing.assert_allclose(G[..., 1:3], mom, rtol=1e-11, atol=1e-11)
+    np.testing.assert_allclose(G[..., 3:5], force, rtol=1e-10, atol=1e-10)
+    G[..., 1:3] = np.random.default_rng(8).normal(size=G[..., 1:3].shape)
+    vel = G[..., 1:3].copy()
+    v, C, dx, vol = p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
+    de = np.empty((len(v), 3))
+    g2p_mls(p["x"], v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
+            dx, 0.01, None, de, None, None, vol, None, None)
+    vp, Cp, de_ref, vol_ref = mls_g2p_reference(order, p["x"], p["vol"], vel, 0.01, ORIGIN, H, CELLS)
+    np.testing.assert_allclose(v, vp, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(C, Cp, rtol=1e-10, atol=1e-10)
+
+
 def _spinning_block(scheme, shape, transfer="flip"):
     """A free elastic L-shaped body, spinning, drifting and stretching, far from the grid's
     origin and from the point the angular momentum is taken about; no supports, no loads, no

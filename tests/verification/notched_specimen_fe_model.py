@@ -7,7 +7,15 @@ right face pulled at 2 m/s from rest. The material is the bilinear von Mises ste
 Ziegler kinematic hardening (post-yield tangent alpha E) and the void growth damage of
 Kanvinde & Deierlein, dD = d(eps_p_eq) / (eta exp(-1.5 T)), no damage at T <= -1/3, T from the
 Cauchy stress at the end of each increment with szz = 0 (docs/fracture.md). The first point
-whose damage reaches 1 marks fracture initiation.
+whose damage reaches 1 marks fracture initiation; with a ``characteristic_length`` l* in the
+specimen (the nonlocal criterion), the first point where the damage averaged over l* reaches
+1: a Gaussian weight of variance l*^2 / 12 per axis (that of a uniform average over a segment
+of length l*) on the Gauss points' current positions, cut at 3 standard deviations, weighted by
+the points' areas and renormalised over the material within reach (neighbour lists built once
+on the initial points, 1.5 times wider than the cut), evaluated each step once some point's own
+damage has reached 1 (the average cannot exceed the largest value). ``snapshots`` records the
+Gauss points' positions, eps_p_eq, damage and stresses at given times (the diagnosis of
+docs/fracture.md).
 
 This model shares no code with pmpm (it imports nothing from it):
 
@@ -44,7 +52,7 @@ __all__ = ["SPECIMEN", "mesh", "run", "polygon"]
 SPECIMEN = {
     "length": 0.1, "width": 0.04, "thickness": 0.01, "radius": 0.008, "pull": 2.0,
     "E": 200e9, "nu": 0.3, "density": 7850.0, "yield_stress": 355e6, "hardening": 0.01,
-    "eta": 0.3, "fracture_energy": 2.0e4,
+    "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 4.0e-3,
 }
 
 
@@ -221,13 +229,23 @@ def _point_update(sig, back, de, C, a, V, Vinv, sy, c):
 
 @nb.njit(cache=True)
 def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thickness, eta,
-           C, P, a, V, Vinv, sy, c, dN, Ng, stop_at_initiation):
+           C, P, a, V, Vinv, sy, c, dN, Ng, stop_at_initiation, snap_times, sigma, nb_ptr, nb_idx):
     """Central differences to ``end_time`` (module doc). Returns (window ends, mean reaction,
-    initiation time or -1, its point x, y, steps)."""
+    initiation time or -1, its point x, y, steps, and at each of ``snap_times`` the Gauss points'
+    positions, equivalent plastic strains, damages and stresses)."""
     n, m = x.shape[0], elems.shape[0]
     sig = np.zeros((m, 4, 3))
     back = np.zeros((m, 4, 3))
     damage = np.zeros((m, 4))
+    eq = np.zeros((m, 4))
+    ksnap = snap_times.shape[0]
+    snap_x = np.zeros((ksnap, m, 4, 2))
+    snap_eq = np.zeros((ksnap, m, 4))
+    snap_d = np.zeros((ksnap, m, 4))
+    snap_s = np.zeros((ksnap, m, 4, 3))
+    isnap = 0
+    gx = np.zeros((m * 4, 2))      # the Gauss points' current positions (nonlocal criterion)
+    gw = np.zeros(m * 4)           # and their volumes (over the thickness)
     fint = np.zeros((n, 2))
     nsamples = int(end_time / sample) + 2
     times = np.zeros(nsamples)
@@ -273,22 +291,53 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
                 de[0], de[1], de[2] = dt * lxx, dt * lyy, dt * (lxy + lyx)
                 dl = _point_update(sig[e, g], back[e, g], de, C, a, V, Vinv, sy, c)
                 s = sig[e, g]
+                eq[e, g] += dl
                 if dl > 0.0:
                     seq = math.sqrt(max(s[0] * s[0] - s[0] * s[1] + s[1] * s[1] + 3.0 * s[2] * s[2], 0.0))
                     T = (s[0] + s[1]) / (3.0 * seq) if seq > 0.0 else 0.0
                     if T > -1.0 / 3.0:
                         damage[e, g] += dl / (eta * math.exp(-1.5 * T))
-                        if damage[e, g] >= 1.0 and initiation < 0.0:
+                        if damage[e, g] >= 1.0 and initiation < 0.0 and sigma <= 0.0:
                             failed_now = True
                             wx = wy = 0.0
                             for k in range(4):
                                 wx += Ng[g, k] * x[elems[e, k], 0]
                                 wy += Ng[g, k] * x[elems[e, k], 1]
                 w = thickness * det      # Gauss weight 1
+                if sigma > 0.0:
+                    gw[4 * e + g] = det
+                    px = py = 0.0
+                    for k in range(4):
+                        px += Ng[g, k] * x[elems[e, k], 0]
+                        py += Ng[g, k] * x[elems[e, k], 1]
+                    gx[4 * e + g, 0], gx[4 * e + g, 1] = px, py
                 for k in range(4):
                     nd = elems[e, k]
                     fint[nd, 0] += w * (s[0] * dndx[k] + s[2] * dndy[k])
                     fint[nd, 1] += w * (s[2] * dndx[k] + s[1] * dndy[k])
+        if sigma > 0.0 and initiation < 0.0:
+            # the nonlocal criterion: the index averaged over l* (a Gaussian of variance l*^2 / 12
+            # per axis, cut at 3 sigma, renormalised over the material within reach), checked once
+            # a Gauss point's own index has reached 1 (the average cannot exceed the largest)
+            top = 0.0
+            for e in range(m):
+                for g in range(4):
+                    top = max(top, damage[e, g])
+            if top >= 1.0:
+                cut2 = 9.0 * sigma * sigma
+                for i in range(m * 4):
+                    num = den = 0.0
+                    for kk in range(nb_ptr[i], nb_ptr[i + 1]):
+                        j = nb_idx[kk]
+                        d2 = (gx[j, 0] - gx[i, 0]) ** 2 + (gx[j, 1] - gx[i, 1]) ** 2
+                        if d2 <= cut2:
+                            wj = gw[j] * math.exp(-0.5 * d2 / (sigma * sigma))
+                            num += wj * damage[j // 4, j % 4]
+                            den += wj
+                    if den > 0.0 and num >= den:
+                        failed_now = True
+                        wx, wy = gx[i, 0], gx[i, 1]
+                        break
         react = 0.0
         for i in range(n):
             v[i, 0] -= dt * fint[i, 0] / mass[i]
@@ -306,14 +355,57 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
             ns += 1
             acc, acc_t = 0.0, 0.0
             next_sample += sample
+        while isnap < ksnap and t >= snap_times[isnap] - 1e-15:
+            for e in range(m):
+                for g in range(4):
+                    for k in range(4):
+                        snap_x[isnap, e, g, 0] += Ng[g, k] * x[elems[e, k], 0]
+                        snap_x[isnap, e, g, 1] += Ng[g, k] * x[elems[e, k], 1]
+                    snap_eq[isnap, e, g] = eq[e, g]
+                    snap_d[isnap, e, g] = damage[e, g]
+                    for k in range(3):
+                        snap_s[isnap, e, g, k] = sig[e, g, k]
+            isnap += 1
         if failed_now:
             initiation = t
             if stop_at_initiation:
                 break
-    return times[:ns], forces[:ns], initiation, wx, wy, steps
+    return times[:ns], forces[:ns], initiation, wx, wy, steps, snap_x, snap_eq, snap_d, snap_s
 
 
-def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiation=True):
+@nb.njit(cache=True)
+def _neighbours(pts, radius):
+    """For each point, the points within ``radius`` (itself included), as CSR arrays
+    (pointers, indices), by binning the points in squares of side ``radius``."""
+    n = pts.shape[0]
+    x0, y0 = pts[:, 0].min(), pts[:, 1].min()
+    nx = int((pts[:, 0].max() - x0) / radius) + 1
+    ny = int((pts[:, 1].max() - y0) / radius) + 1
+    cell = np.empty(n, np.int64)
+    for i in range(n):
+        cell[i] = int((pts[i, 0] - x0) / radius) * ny + int((pts[i, 1] - y0) / radius)
+    order = np.argsort(cell)
+    start = np.full(nx * ny + 1, n, np.int64)
+    for k in range(n - 1, -1, -1):
+        start[cell[order[k]]] = k
+    for c in range(nx * ny - 1, -1, -1):
+        start[c] = min(start[c], start[c + 1])
+    counts = np.zeros(n + 1, np.int64)
+    out = []
+    for i in range(n):
+        ci, cj = int((pts[i, 0] - x0) / radius), int((pts[i, 1] - y0) / radius)
+        for a in range(max(ci - 1, 0), min(ci + 2, nx)):
+            for b in range(max(cj - 1, 0), min(cj + 2, ny)):
+                c = a * ny + b
+                for k in range(start[c], start[c + 1]):
+                    j = order[k]
+                    if (pts[j, 0] - pts[i, 0]) ** 2 + (pts[j, 1] - pts[i, 1]) ** 2 <= radius * radius:
+                        out.append(j)
+                        counts[i + 1] += 1
+    return np.cumsum(counts), np.array(out, dtype=np.int64)
+
+
+def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiation=True, snapshots=()):
     """Pull the specimen meshed at element size ``h``.
 
     Returns a dict: ``time`` (window ends, s), ``force`` (mean reaction Rx of the held face over
@@ -331,13 +423,24 @@ def run(h, sp=SPECIMEN, end_time=2.0e-3, sample=1.0e-5, cfl=0.5, stop_at_initiat
     c = math.sqrt(sp["E"] / (rho * (1 - sp["nu"] ** 2)))
     edges = np.linalg.norm(nodes[elems] - nodes[np.roll(elems, -1, axis=1)], axis=2)
     dt = cfl * edges.min() / c
-    times, forces, initiation, wx, wy, steps = _march(
+    snap_times = np.sort(np.asarray(snapshots, dtype=np.float64).reshape(-1))
+    lstar = sp.get("characteristic_length")
+    sigma = lstar / math.sqrt(12.0) if lstar else 0.0
+    if sigma > 0.0:
+        # neighbour lists on the initial Gauss points, wide enough for the strains to initiation
+        # (the kernel is cut at 3 sigma on the current positions)
+        gp0 = np.einsum("ga,mai->mgi", _N, nodes[elems]).reshape(-1, 2)
+        nb_ptr, nb_idx = _neighbours(np.ascontiguousarray(gp0), 1.5 * 3.0 * sigma)
+    else:
+        nb_ptr, nb_idx = np.zeros(1, np.int64), np.zeros(0, np.int64)
+    times, forces, initiation, wx, wy, steps, sx, seq, sd, ss = _march(
         nodes.copy(), np.zeros_like(nodes), mass, elems.astype(np.int64), held, pulled, float(sp["pull"]), dt,
         float(end_time), float(sample), float(sp["thickness"]), float(sp["eta"]), mat.C, mat.P, mat.a, mat.V,
         mat.Vinv, float(sp["yield_stress"]), float(mat.c), np.ascontiguousarray(_DN), np.ascontiguousarray(_N),
-        stop_at_initiation)
+        stop_at_initiation, snap_times, sigma, nb_ptr, nb_idx)
     return {"time": times, "force": forces, "initiation": initiation if initiation >= 0 else None,
-            "where": (wx, wy) if initiation >= 0 else None, "steps": steps, "dt": dt, "elements": len(elems)}
+            "where": (wx, wy) if initiation >= 0 else None, "steps": steps, "dt": dt, "elements": len(elems),
+            "snapshots": {"time": snap_times, "x": sx, "eps_p_eq": seq, "damage": sd, "stress": ss}}
 
 
 if __name__ == "__main__":

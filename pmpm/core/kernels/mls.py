@@ -17,15 +17,21 @@ fraction f of its cell): the kernels take the gradient itself there.
 
 The force's torque about any point vanishes for a symmetric stress
 (sum_i (x_i - x_p) (x) g_ip = I), so with the affine momentum the transfers conserve angular
-momentum. The loops are pmpm.core.kernels.transfer's (``scatter_p2g``, ``gather2``,
-``gather_gradient``) and the APIC module's (``affine_moments``, ``gather_affine``,
-``affine_matrix``). The position update x += dx and the stress update are the step's later
-passes (no grid visit).
+momentum. The linear kernels' loops are pmpm.core.kernels.transfer's (``scatter_p2g``,
+``gather2``, ``gather_gradient``); the quadratic and cubic ones are this module's, written for
+speed (docs/performance.md, "The MLS step made faster"): D_p^-1 is the B-spline's constant
+wherever the support is not boundary-modified (``_inverse_moments``), the gather sums by rows,
+the scatter indexes a flat view of the grid, and both kernels let the compiler fuse multiplies
+and adds (FMA; no fast-math assumption about NaN or infinity, so the non-finite checks hold).
+The position update x += dx and the stress update are the step's later passes (no grid visit).
 """
-import numba as nb
+import math
 
-from pmpm.core.kernels.affine import (D_FLOOR, affine_matrix, affine_moments, affine_momentum, cell_position,
-                                      gather_affine, store_velocity_update)
+import numba as nb
+import numpy as np
+
+from pmpm.core.kernels.affine import (D_FLOOR, affine_moments, affine_momentum, cell_position,
+                                      store_velocity_update)
 from pmpm.core.kernels.transfer import (block_buffers, block_start, gather2, gather_gradient, particle_forces,
                                         scatter_p2g, strain_increment)
 from pmpm.core.shape import BLOCK
@@ -33,7 +39,104 @@ from pmpm.core.shape import BLOCK
 __all__ = ["p2g_mls", "g2p_mls"]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mvx, mvy, k, force, fx, fy, A):
+    """Particle q's MLS scatter (quadratic, cubic): node (i0 + a, j0 + b), at (ex_a, ey_b) =
+    (i0 + a - sx, j0 + b - sy) cells from the particle, gets w_a w_b times m, m v + k (ex_a, ey_b)
+    (``k`` = (kxx, kxy, kyx, kyy) of pmpm.core.kernels.affine.affine_momentum) and, with
+    ``force``, f_ext + A (ex_a, ey_b) into fields 0 .. 4. ``Gf`` is the grid's fields
+    flattened (``nf`` fields a node, ``row`` = nodes per window row times nf): one unsigned
+    index per node, where G[ii, jj, f] cost each access the negative-index wraparound of three
+    indices (the same sums to the bit)."""
+    i0 = I0[q]   # in registers: the loop writes G, which the compiler cannot tell from I0
+    j0 = J0[q]
+    base = np.uint64((i0 - ox) * row + (j0 - oy) * nf)   # node (i0, j0)'s first field
+    for a in range(K):
+        wa = WX[a, q]
+        ex = i0 + a - sx
+        for b in range(K):
+            n = base + np.uint64(a * row + b * nf)
+            w = wa * WY[b, q]
+            ey = j0 + b - sy
+            Gf[n] += w * mp
+            Gf[n + np.uint64(1)] += w * (mvx + k[0] * ex + k[1] * ey)
+            Gf[n + np.uint64(2)] += w * (mvy + k[2] * ex + k[3] * ey)
+            if force:
+                Gf[n + np.uint64(3)] += w * (fx + A[0] * ex + A[1] * ey)
+                Gf[n + np.uint64(4)] += w * (fy + A[2] * ex + A[3] * ey)
+
+
+@nb.njit(cache=True, inline="always")
+def _gather_mls(G, q, K, I0, J0, WX, WY, ox, oy, sx, sy):
+    """v_p = sum_i N_i v_i and B_p = sum_i N_i v_i (x_i - x_p)^T (cells) of particle q, v the
+    grid velocity in fields 1, 2: (vx, vy, bxx, bxy, byx, byy), as
+    pmpm.core.kernels.affine.gather_affine, summed by rows: per row a the sums r = sum_b w_b v
+    and t = sum_b w_b ey_b v, then v_p = sum_a w_a r, B_p = sum_a (w_a ex_a r, w_a t): four
+    multiply-adds per node instead of eight (the sums differ in round-off only)."""
+    vx = 0.0
+    vy = 0.0
+    bxx = 0.0
+    bxy = 0.0
+    byx = 0.0
+    byy = 0.0
+    i0 = I0[q]
+    j0 = J0[q]
+    for a in range(K):
+        ii = i0 + a - ox
+        rx = 0.0
+        ry = 0.0
+        tx = 0.0
+        ty = 0.0
+        for b in range(K):
+            jj = j0 + b - oy
+            wb = WY[b, q]
+            wy = wb * (j0 + b - sy)
+            gx = G[ii, jj, 1]
+            gy = G[ii, jj, 2]
+            rx += wb * gx
+            ry += wb * gy
+            tx += wy * gx
+            ty += wy * gy
+        wa = WX[a, q]
+        wx = wa * (i0 + a - sx)
+        vx += wa * rx
+        vy += wa * ry
+        bxx += wx * rx
+        byx += wx * ry
+        bxy += wa * tx
+        byy += wa * ty
+    return vx, vy, bxx, bxy, byx, byy
+
+
+@nb.njit(cache=True, inline="always")
+def _inside(s, K, n):
+    """Whether the B-spline support of coordinate ``s`` (cells) on an axis of ``n`` cells is
+    the plain one, not boundary-modified: the first node as pmpm.core.shape's block kernels
+    find it (the same expressions, so the two agree on every float), its K nodes within
+    0 .. n. False for a non-finite s."""
+    c = math.floor(s + 0.5) if K == 3 else math.floor(s)
+    return c - 1 >= 0 and c + K - 2 <= n
+
+
+@nb.njit(cache=True, inline="always")
+def _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy):
+    """D_p^-1 of particle q in 1/cells^2, (ixx, ixy, iyy). Where the particle's support lies
+    inside the grid (the B-splines not boundary-modified: pmpm.core.shape's block kernels)
+    D_p is the B-spline's variance times I, 1/4 (quadratic) or 1/3 (cubic) cells^2, and its
+    inverse is taken as that constant (the sum of the weights gives it to round-off, at the
+    cost of a pass over the weights and a division per particle); next to the grid's edges
+    D_p is summed from the particle's weights. A particle on the edge (D_p singular) gets
+    zero: it exerts no stress force and keeps no affine velocity (APIC's rule)."""
+    if _inside(sx, K, ncx) and _inside(sy, K, ncy):
+        c = 4.0 if K == 3 else 3.0
+        return c, 0.0, c
+    dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
+    det = dxx * dyy - dxy * dxy
+    r = 1.0 / det if det > D_FLOOR else 0.0
+    return dyy * r, -dxy * r, dxx * r
+
+
+@nb.njit(cache=True, fastmath={"contract"})
 def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
             G, ox, oy, origin, inv_h, ncx, ncy, shape):
     """Scatter mass, the APIC momentum m (v + C (x_i - x_p)) (``C`` (N, 4) in 1/s), the
@@ -42,10 +145,13 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
     with_force = stress is not None or gravity is not None or load_id is not None
     K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
+    nf = G.shape[2]
+    row = G.shape[1] * nf
+    Gf = G.reshape(-1)   # a view (the window is C-contiguous): the scatter's flat node index
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
-            p = p0 + q
+            p = np.uint64(p0 + q)   # unsigned: no negative-index wraparound in the many particle-array accesses
             mp, affine = affine_momentum(p, x, m, C, origin, inv_h, h)
             sx, sy = affine[4], affine[5]
             fx, fy, sxx, syy, sxy = particle_forces(p, m, vol, stress, gravity, load_id, load_w, load_vec, inv_h)
@@ -53,22 +159,15 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
                 scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
                             with_force, fx, fy, stress is not None, sxx, syy, sxy, None)
             else:
-                dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
-                det = dxx * dyy - dxy * dxy
-                # D^-1 in 1/cells^2; a particle on the grid's edge (D singular) exerts no stress
-                # force (APIC keeps no affine velocity there either)
-                r = 1.0 / det if det > D_FLOOR else 0.0
-                ixx = dyy * r
-                ixy = -dxy * r
-                iyy = dxx * r
+                ixx, ixy, iyy = _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy)
                 # A = (-V sigma / h) D^-1: the force N_i A (x_i - x_p), the form of the momentum's
-                scatter_p2g(G, q, K, I0, J0, WX, WY, ox, oy, True, mp, mp * v[p, 0], mp * v[p, 1], affine,
-                            with_force, fx, fy, stress is not None, 0.0, 0.0, 0.0,
-                            (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy,
-                             sxy * ixx + syy * ixy, sxy * ixy + syy * iyy))
+                _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mp * v[p, 0], mp * v[p, 1],
+                             affine, with_force, fx, fy,
+                             (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy,
+                              sxy * ixx + syy * ixy, sxy * ixy + syy * iyy))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"contract"})
 def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
             strain, de, dw, F, vol, vol0, dq):
     """v_p = sum N_ip v_i and C_p = sum v_i g_ip^T (1/s, into ``C``) from the grid velocities
@@ -82,7 +181,7 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
         for q in range(nq):
-            p = p0 + q
+            p = np.uint64(p0 + q)   # unsigned: no negative-index wraparound in the many particle-array accesses
             if K == 2:
                 vx, vy = gather2(G, 1, q, K, I0, J0, WX, WY, ox, oy)
                 lxx, lxy, lyx, lyy = gather_gradient(G, 1, q, K, I0, J0, WX, WY, ox, oy)
@@ -92,9 +191,13 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
                 cyy = lyy * inv_h
             else:
                 sx, sy = cell_position(x, p, origin, inv_h)
-                dxx, dyy, dxy = affine_moments(q, K, I0, J0, WX, WY, sx, sy)
-                vx, vy, bxx, bxy, byx, byy = gather_affine(G, 1, q, K, I0, J0, WX, WY, ox, oy, sx, sy)
-                cxx, cxy, cyx, cyy = affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, inv_h)
+                ixx, ixy, iyy = _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy)
+                vx, vy, bxx, bxy, byx, byy = _gather_mls(G, q, K, I0, J0, WX, WY, ox, oy, sx, sy)
+                # C = B D^-1 / h
+                cxx = (bxx * ixx + bxy * ixy) * inv_h
+                cxy = (bxx * ixy + bxy * iyy) * inv_h
+                cyx = (byx * ixx + byy * ixy) * inv_h
+                cyy = (byx * ixy + byy * iyy) * inv_h
             vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             strain_increment(p, dt, cxx, cxy, cyx, cyy, de, dw, strain, vol, F, vol0, dq)
     return vmax2 ** 0.5, bad

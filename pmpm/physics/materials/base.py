@@ -257,7 +257,7 @@ class KinematicHardening(Material):
             return
         self.fracture = fracture_option.read_fracture(table, f"{self.key}.fracture")
         self.fracture_length = self.fracture["length"]
-        self.state_fields = {**type(self).state_fields, **fracture_option.FRACTURE_FIELDS}
+        self.state_fields = {**type(self).state_fields, **fracture_option.fracture_fields(self.fracture)}
         self.tensor_state_fields = (*type(self).tensor_state_fields, "effective_stress")
 
     #: whether the update keeps V plastic_work in joules (keep_work_in_joules): in a run, whose
@@ -269,7 +269,7 @@ class KinematicHardening(Material):
     def use_cell_size(self, h):
         self.work_in_joules = True   # called by pmpm.build for every material of a run
         if self.fracture is not None and self.fracture["length"] is None:
-            self.fracture_length = float(h)
+            self.fracture_length = self.fracture.get("band_cells", 1.0) * float(h)
 
     def update_stress(self, stress, de, state, mat_ids, which):
         """The material's plain kernel (:meth:`plastic_update`), between the fracture option's
@@ -285,7 +285,10 @@ class KinematicHardening(Material):
         ids, phase, old, eq0, work0 = fracture_option.prelude(stress, de, eq, work, mat_ids, which,
                                                               self.plane_strain, fp, damage, crack, eff)
         self.plastic_update(stress, de, state, ids, 0)
-        fracture_option.epilogue(phase, old, eq0, work0, stress, de, eq, work, eff, crack, damage, fwork, fp)
+        # the local criterion accumulates the damage itself; the nonlocal one its local index
+        index = state.get("vgm_index")
+        fracture_option.epilogue(phase, old, eq0, work0, stress, de, eq, work, eff, crack, damage, fwork, fp,
+                                 damage if index is None else index)
 
     def plastic_update(self, stress, de, state, mat_ids, which):
         """The plastic model's own stress update (its numba kernel): see :meth:`update_stress`."""

@@ -8,7 +8,9 @@ the scene by a sub-table of the material::
     model = "void_growth"      # Kanvinde & Deierlein's void growth model (docs/fracture.md)
     eta = 1.0                  # fracture strain at zero triaxiality (illustrative: docs/fracture.md)
     fracture_energy = 1.0e5    # G_f, J/m^2: energy per unit crack area the release dissipates
-    length = 0.01              # l_c, m: width of the crack band (default: the grid's cell size)
+    length = 0.01              # l_c, m: width of the crack band (default: band_cells x the cell size)
+    band_cells = 1.5           # or the band's width in cells (default 1; not with length)
+    characteristic_length = 0.004   # l*, m: the criterion averaged over l* (default: at each point)
 
 Damage (docs/fracture.md has the sources and the choice of model)
     dD = d(eps_p_eq) / eps_f(T),  eps_f(T) = eta exp(-1.5 T),  T = sigma_m / sigma_eq
@@ -17,6 +19,12 @@ Damage (docs/fracture.md has the sources and the choice of model)
     Wierzbicki's: no ductile fracture under such compression). Under proportional loading
     the increments sum to eps_p_eq / eps_f(T): the point fails where its equivalent plastic
     strain reaches the locus, which is also the stress-modified critical strain criterion.
+Nonlocal criterion (``characteristic_length`` l*)
+    The increments above accumulate the point's own index (field ``vgm_index``), and the point
+    fails when the index averaged over l* reaches 1 (:func:`fail_where`, called by the effect
+    pmpm.physics.fracture_nonlocal, which computes the average on the grid); ``damage`` then
+    holds the average. Without l* the index is ``damage`` itself and a point fails where it
+    reaches 1.
 Failure (D = 1) and the release of its tension
     From then the material's own update advances an *effective* stress (field
     ``effective_stress``), and the stress the point transmits is its compressive principal
@@ -57,7 +65,7 @@ from pmpm.errors import ConfigError
 
 __all__ = ["FractureModel", "VoidGrowth", "FRACTURE_MODELS", "read_fracture", "FRACTURE_FIELDS",
            "triaxiality", "fracture_strain", "release", "begin_point", "elastic_point",
-           "prelude", "epilogue",
+           "prelude", "epilogue", "fail_where", "fracture_fields", "NONLOCAL_FIELDS",
            "fracture_point_reference", "triaxiality_reference", "CUTOFF"]
 
 #: the energy failed material points dissipate (J): the field ``fracture_work`` (J/m^3) over the
@@ -70,9 +78,18 @@ CUTOFF = -1.0 / 3.0
 
 #: per-particle fields a material with fracture keeps (zero at the start)
 FRACTURE_FIELDS = {"damage": (), "fracture_work": (), "crack_strain": (2,), "effective_stress": (4,)}
+#: and with a characteristic length (the nonlocal criterion): the local void growth index
+NONLOCAL_FIELDS = {"vgm_index": ()}
 
 # layout of the kernels' parameter vector
-_MODEL, _ETA, _SPECIFIC, _E, _NU = 0, 1, 2, 3, 4
+_MODEL, _ETA, _SPECIFIC, _E, _NU, _NONLOCAL = 0, 1, 2, 3, 4, 5
+
+
+def fracture_fields(settings):
+    """The per-particle fields of a material with these fracture settings."""
+    if settings.get("characteristic_length") is None:
+        return dict(FRACTURE_FIELDS)
+    return {**FRACTURE_FIELDS, **NONLOCAL_FIELDS}
 
 
 class FractureModel:
@@ -135,15 +152,23 @@ def read_fracture(table, key):
     settings = {"model": model, **FRACTURE_MODELS[model].read(table, key)}
     settings["fracture_energy"] = _positive(table, key, "fracture_energy")
     settings["length"] = _positive(table, key, "length", required=False)
+    settings["characteristic_length"] = _positive(table, key, "characteristic_length", required=False)
+    # the crack band's width in cells, for the default l_c (band_cells x the cell size)
+    band = _positive(table, key, "band_cells", required=False)
+    if band is not None and settings["length"] is not None:
+        raise ConfigError(f"{key}.band_cells", "give either length (m) or band_cells (cells), not both")
+    settings["band_cells"] = 1.0 if band is None else band
     if table:
         raise ConfigError(f"{key}.{sorted(table)[0]}", "unknown key for this fracture model")
     return settings
 
 
 def kernel_params(settings, E, nu, length):
-    """The kernels' parameter vector [model id, eta, G_f / l_c, E, nu] (float64)."""
+    """The kernels' parameter vector [model id, eta, G_f / l_c, E, nu, nonlocal (1.0 or 0.0)]
+    (float64)."""
     model = FRACTURE_MODELS[settings["model"]]
-    return np.array([model.model_id, settings["eta"], settings["fracture_energy"] / length, E, nu],
+    nonlocal_ = 0.0 if settings.get("characteristic_length") is None else 1.0
+    return np.array([model.model_id, settings["eta"], settings["fracture_energy"] / length, E, nu, nonlocal_],
                     dtype=np.float64)
 
 
@@ -305,11 +330,14 @@ def prelude(stress, de, eps_eq, work, mat_ids, which, plane_strain, fp, damage, 
 
 
 @nb.njit(cache=True)
-def epilogue(phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damage, fwork, fp):
-    """After the material's plain kernel: the damage of the intact points (written out here:
-    through an inlined point function numba made this loop several times slower), the failure
-    of those reaching 1, the release and fracture work of the failed ones (functions of their
-    own: rare)."""
+def epilogue(phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damage, fwork, fp, index):
+    """After the material's plain kernel: the void growth index of the intact points (written
+    out here: through an inlined point function numba made this loop several times slower),
+    the failure of those reaching 1, the release and fracture work of the failed ones
+    (functions of their own: rare). ``index`` is ``damage`` itself for the local criterion;
+    with a characteristic length it is the local index (field ``vgm_index``), and the points
+    fail in :func:`fail_where` when its nonlocal average reaches 1 (pmpm.physics.fracture_nonlocal)."""
+    local = fp[_NONLOCAL] == 0.0
     for p in range(stress.shape[0]):
         ph = phase[p]
         if ph < 0:    # another material's point
@@ -317,12 +345,30 @@ def epilogue(phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damag
         if ph == 0:   # intact
             deq = eps_eq[p] - eq0[p]
             if deq > 0.0:
-                damage[p] += deq / fracture_strain(fp, triaxiality(stress[p, 0], stress[p, 1], stress[p, 2],
-                                                                   stress[p, 3]))
-                if damage[p] >= 1.0:
+                index[p] += deq / fracture_strain(fp, triaxiality(stress[p, 0], stress[p, 1], stress[p, 2],
+                                                                  stress[p, 3]))
+                if local and index[p] >= 1.0:
                     _fail(p, stress, eff, crack, damage, fp)
         else:
             _soften(p, ph, old[p], eq0[p], work0[p], stress, de, eps_eq, work, eff, crack, fwork, fp)
+
+
+@nb.njit(cache=True)
+def fail_where(average, mat_ids, which, stress, eff, crack, damage, fp):
+    """The nonlocal criterion's decision: each intact point of the material (``which``; -1:
+    every point) takes the nonlocal average of the void growth index as its damage and fails
+    where it reaches 1 (pmpm.physics.fracture_nonlocal computes the average). Returns the
+    count of points that failed."""
+    count = 0
+    for p in range(stress.shape[0]):
+        if (which >= 0 and mat_ids[p] != which) or damage[p] >= 1.0:
+            continue
+        if average[p] >= 1.0:
+            _fail(p, stress, eff, crack, damage, fp)
+            count += 1
+        else:
+            damage[p] = max(average[p], 0.0)
+    return count
 
 
 # -- the NumPy reference twin ----------------------------------------------------------------
