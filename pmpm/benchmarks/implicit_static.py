@@ -15,7 +15,8 @@ import os
 from pmpm.scene.config import parse_scene, read_toml
 
 __all__ = ["column_pushover_scene", "column_tip_stiffness", "column_collapse_load", "COLUMN_B", "COLUMN_L",
-           "COLUMN_E", "COLUMN_NU", "COLUMN_SY", "portal_gravity_data", "portal_pushover_data"]
+           "COLUMN_E", "COLUMN_NU", "COLUMN_SY", "portal_gravity_data", "portal_pushover_data",
+           "column_load_factor_scene"]
 
 #: the column: width (m), pushed height (m), steel's E (Pa), nu, yield stress (Pa)
 COLUMN_B, COLUMN_L, COLUMN_E, COLUMN_NU, COLUMN_SY = 0.4, 4.0, 200e9, 0.3, 250e6
@@ -119,4 +120,50 @@ def portal_pushover_data(cell_size=0.05, displacement=0.02, steps=4, material=No
     data["output"].update(history_interval=1.0 / steps, interval=1.0)
     data["solver"] = {"shape_function": "cubic", "integrator": "implicit", "analysis": "static",
                       "time_step": 1.0 / steps, "end_time": 1.0}
+    return data
+
+
+def column_load_factor_scene(control="arc_length", steps=20, h=0.1, axial=0.0, lateral=1e6, material="bilinear_vonmises",
+                             displacement=0.3, increment=0.1, max_load_factor=None, target_iterations=4,
+                             axis="auto", implicit=None):
+    """The clamped column of :func:`column_pushover_scene` (base on the grid's lower edge, top
+    free) under a lateral load pattern (``lateral`` N along +x, a force set on the particles of
+    the band y in [L - h, L]) scaled by the load factor, and an axial load ``axial`` N (down, a
+    force set on the band y in [L, L + h], held at its value: outside the pattern), under
+    ``control`` = ``"arc_length"`` (first step's load factor ``increment``) or
+    ``"displacement"`` (the top's x displacement ``displacement`` at the end). Tracks: ``top``
+    (0, L), ``low`` (0, 2 h), the particle rows nearest them."""
+    mat = {"type": material, "E": COLUMN_E, "nu": COLUMN_NU, "density": 7850.0}
+    if material != "linear_elastic":
+        mat.update(yield_stress=COLUMN_SY, hardening=0.0)
+    x_left = -0.6 - COLUMN_B / 2
+    half = COLUMN_B / 2
+    forces = [{"name": "lateral", "body": "column", "lower": [-half, COLUMN_L - h], "upper": [half, COLUMN_L],
+               "force": [lateral, 0.0]}]
+    if axial:
+        forces.append({"name": "axial", "body": "column", "lower": [-half, COLUMN_L + 1e-9 * h],
+                       "upper": [half, COLUMN_L + h], "force": [0.0, -axial]})
+    static = {"control": control, "pattern": ["lateral"]}
+    if control == "arc_length":
+        static.update(load_factor_increment=increment, target_iterations=target_iterations)
+    else:
+        static.update(point=[0.0, COLUMN_L], component="x", displacement=displacement)
+    if max_load_factor is not None:
+        static["max_load_factor"] = max_load_factor
+    data = {"title": "column under a lateral load pattern", "formulation": "plane_stress", "particles_per_cell": 2,
+            "grid": {"origin": [x_left, 0.0], "cell_size": h,
+                     "cells": [int(round(1.6 / h)), int(round((COLUMN_L + 0.6) / h))]},
+            "materials": {"steel": mat},
+            "bodies": [{"name": "column", "shape": "rectangle", "material": "steel",
+                        "lower": [-half, 0.0], "upper": [half, COLUMN_L + h]}],
+            "boundary": [{"name": "base", "type": "fixed", "lower": [x_left, 0.0], "upper": [1.0, 0.0],
+                          "reaction": True, "moment_about": [0.0, 0.0]}],
+            "loads": {"forces": forces},
+            "solver": {"integrator": "implicit", "analysis": "static", "time_step": 1.0 / steps, "end_time": 1.0,
+                       "static": static},
+            "output": {"interval": 1.0, "history_interval": 1.0 / steps, "fields": ["x", "x0", "stress"],
+                       "track": [{"name": "top", "point": [0.0, COLUMN_L]}, {"name": "low", "point": [0.0, 2 * h]}]},
+            "parallel": {"axis": axis}}
+    if implicit:
+        data["solver"]["implicit"] = dict(implicit)
     return data
