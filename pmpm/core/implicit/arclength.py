@@ -23,12 +23,17 @@ negative past a limit point where the tangent's du_F turns against the path; Fen
 The arc length follows the iterations the last step took, dl <- dl sqrt(target / iterations)
 (Crisfield), within [1/2, 2] of its last value and at most ``MAX_ARC_GROWTH`` times the first.
 
-A step's length h in pseudo-time scales the step: the displacement's increment is
-displacement h / end_time and the arc length dl h / time_step, so that a step the scheme halves
-after a failure (pmpm.core.implicit.scheme) is a half step. When the loads outside the pattern
-are not zero, the first step brings them to equilibrium at lambda = 0 (plain Newton); the
-controlled steps follow. ``max_load_factor``: a step that would pass it is solved again at
-lambda = max_load_factor (load control), and the steps after it hold that load.
+Each step first brings its start back to equilibrium at the start's load factor (plain
+Newton at fixed lambda; the first step: the fixed loads at lambda = 0), and the constraint
+measures the increment from there: the particles have moved across the grid since the last
+step converged, and on the new step's grid the converged state is off balance by a force that
+a tangent softened by yielding turns into a correction larger than a short arc (the
+quadratic then has no real root, however short the arc). A step's length h in pseudo-time
+scales the step: the point's displacement is displacement t / end_time at every step's end (the
+balance's move included) and the arc length
+dl h / time_step, so that a step the scheme halves after a failure
+(pmpm.core.implicit.scheme) is a half step. ``max_load_factor``: a step that would pass it is
+solved again at lambda = max_load_factor (load control), and the steps after it hold that load.
 
 The convergence test is Newton's (pmpm.core.implicit.newton): the residual against the force
 scale and the energy of the next correction; the constraint holds exactly after every
@@ -48,6 +53,10 @@ __all__ = ["LoadFactorControl", "DisplacementControl", "ArcLength", "make_contro
            "MAX_ARC_GROWTH"]
 logger = logging.getLogger(__name__)
 
+#: nodes whose mass is below this fraction of the largest node's are left out of the arc
+#: length's norm (the cubic splines' tails beyond a body's edge: their stiffness is as tiny
+#: as their mass and their increments are the ill-conditioned rows' (1.7 km on the column)
+EDGE_MASS = 1e-2
 #: the arc length never grows past this many times the first step's
 MAX_ARC_GROWTH = 4.0
 #: the window array's external-force fields (pmpm.core.implicit.kernels)
@@ -67,6 +76,8 @@ class LoadFactorControl:
     """
 
     name = None
+    #: the names of the path's columns after (t, load factor, iterations)
+    columns = ()
 
     def __init__(self, options, time_step, end_time):
         self.options = dict(options)
@@ -74,7 +85,6 @@ class LoadFactorControl:
         self.max_load_factor = self.options["max_load_factor"]
         self.load_factor = 0.0
         self.path = []            # (t, load factor, iterations) of every converged step
-        self.equilibrated = False  # the fixed loads brought to equilibrium (first step)
         self.finished = False     # max_load_factor reached: the steps hold it
         self.previous = None      # the last controlled step's increment (window array)
         self._pattern_ids = None
@@ -146,41 +156,29 @@ class LoadFactorControl:
         free = problem.free
         rf = d.owned_values(ref).copy()
         rf[~free] = 0.0
-        fixed_free = d.owned_values(fixed)[free]
-        has_fixed = problem.dot(fixed_free, fixed_free) > 0.0
-        if self.finished or (has_fixed and not self.equilibrated):
-            # the loads held at their value (first step), or max_load_factor reached: load control
+        if self.finished:
+            # max_load_factor reached: the steps hold it (load control)
             problem.fext = fixed + self.load_factor * ref
             problem.force_scale = self._scale(problem, fixed, ref, abs(self.load_factor))
             iterations = newton(problem, u, opts, history)
-            self.equilibrated = True
             self.after_step(problem, u)
             self._record(t0 + h, iterations)
+            self._log(s)
             return iterations
-        self.equilibrated = True
-        # the start state on this step's grid: the last step's converged state is not exactly in
-        # equilibrium on it (the grid is reset and the particles have moved across it), and that
-        # out-of-balance force, through a tangent softened by yielding, would take the first
-        # correction off the arc (no real root) however short the arc. So the step first brings
-        # its start back to equilibrium at the start's load factor (plain Newton, fixed lambda),
-        # and the constraint measures the increment from there.
+        # the start state on this step's grid (the control's own rule: ``balance``); the
+        # constraint measures the increment from the balanced start ``base``
         problem.fext = fixed + self.load_factor * ref
         problem.force_scale = self._scale(problem, fixed, ref, abs(self.load_factor))
         base = np.zeros_like(u)
-        r0, n0 = problem.residual(base)
-        balance = 0
-        if n0 > opts["residual_tolerance"] * problem.force_scale:
-            balance = newton(problem, base, opts)
-        logger.debug("step start: lambda %.6g, residual %.3g (%d iterations to balance it)", self.load_factor,
-                     n0, balance)
+        lam_start, balance = self.balance(problem, base, fixed, ref, rf, opts)
+        self.t_step = t0 + h
         dlam, du = self.predict(problem, rf, h, base)
         u[...] = problem.add(base, du, 1.0)
-        problem.force_scale = self._scale(problem, fixed, ref, max(abs(self.load_factor),
-                                                                   abs(self.load_factor + dlam)))
+        problem.force_scale = self._scale(problem, fixed, ref, max(abs(lam_start), abs(lam_start + dlam)))
         energy0 = None
         base_owned = d.owned_values(base).copy()
         for k in range(opts["max_iterations"] + 1):
-            lam = self.load_factor + dlam
+            lam = lam_start + dlam
             problem.fext = fixed + lam * ref
             r, norm = problem.residual(u)
             if not math.isfinite(norm):
@@ -212,21 +210,28 @@ class LoadFactorControl:
             u[...] = problem.add(u, uR + dl * uF, 1.0)
             dlam += dl
         iterations = k
-        lam = self.load_factor + dlam
-        if lam > self.max_load_factor >= self.load_factor:
+        lam = lam_start + dlam
+        if lam > self.max_load_factor >= lam_start:
             # past the largest load factor asked: the step again at exactly that load, from the
             # converged increment scaled back (load control)
-            u[...] = base + (u - base) * ((self.max_load_factor - self.load_factor) / dlam)
+            u[...] = base + (u - base) * ((self.max_load_factor - lam_start) / dlam)
             problem.fext = fixed + self.max_load_factor * ref
             iterations += newton(problem, u, opts, history)
             lam, self.finished = self.max_load_factor, True
         self.previous = u - base   # (a window array: the next step's unknowns may differ)
-        self.previous_dlam = lam - self.load_factor
+        self.previous_dlam = lam - lam_start
         self.load_factor = lam
         self.adapt(iterations)   # (the controlled iterations: the balance's are the grid's, not the arc's)
         self.after_step(problem, u)
         self._record(t0 + h, iterations + balance)
+        self._log(s)
         return iterations + balance
+
+    def balance(self, problem, base, fixed, ref, rf, opts):
+        """Bring the step's start to equilibrium on this step's grid, in ``base`` (window, zero
+        on entry); returns (the load factor there, iterations). Here: nothing (a constraint on
+        the whole increment, such as a point's displacement, absorbs the start's imbalance)."""
+        return self.load_factor, 0
 
     def _scale(self, problem, fixed, ref, lam):
         """The step's force scale: the start's internal force and the loads at ``lam``."""
@@ -237,6 +242,12 @@ class LoadFactorControl:
 
     def _record(self, t, iterations):
         self.path.append((t, self.load_factor, iterations))
+
+    def _log(self, s):
+        if s.decomp.rank == 0:
+            row = self.path[-1]
+            logger.info("t = %.6g: load factor %.8g (%d iterations%s)", row[0], row[1], row[2],
+                        "".join(f", {name} {value:.6g}" for name, value in zip(self.columns, row[3:])))
 
     def adapt(self, iterations):
         """After a converged controlled step (arc length: the next arc's length)."""
@@ -256,10 +267,13 @@ class LoadFactorControl:
 
 class DisplacementControl(LoadFactorControl):
     """The controlled point's displacement component prescribed (``point``, ``component``,
-    ``displacement`` at end_time, linear in pseudo-time): the particle nearest ``point`` by
-    its initial position (the rule of ``[[output.track]]``), followed by its id."""
+    ``displacement`` at end_time, linear in pseudo-time: the point's displacement is
+    displacement t / end_time at the end of every step, the fixed loads' share and the steps'
+    balances included): the particle nearest ``point`` by its initial position (the rule of
+    ``[[output.track]]``), followed by its id."""
 
     name = "displacement"
+    columns = ("point displacement (m)",)
 
     def __init__(self, options, time_step, end_time):
         super().__init__(options, time_step, end_time)
@@ -301,7 +315,10 @@ class DisplacementControl(LoadFactorControl):
     def predict(self, problem, rf, h, base):
         uF = tangent_direction(problem, rf, base)
         self.c = self.weights(problem)
-        self.target = self.options["displacement"] * h / self.end_time
+        # the point follows the schedule displacement t / end_time exactly: this step's increment
+        # from the balanced start is what remains of it after the earlier steps and the balance
+        scheduled = self.options["displacement"] * self.t_step / self.end_time
+        self.target = scheduled - self.point_displacement - problem.dot(self.c, problem.dofs.owned_values(base))
         slope = problem.dot(self.c, uF)
         if slope == 0.0 or not math.isfinite(slope):
             raise NewtonFailed("displacement control: the pattern does not move the controlled point")
@@ -323,16 +340,76 @@ class DisplacementControl(LoadFactorControl):
 
 
 class ArcLength(LoadFactorControl):
-    """Crisfield's cylindrical arc length, |u|^2 = dl^2 over the free components (module doc):
-    the first step's arc is ``load_factor_increment`` |K^-1 f_ref|."""
+    """Crisfield's cylindrical arc length, |u|_m^2 = dl^2 over the free components (module doc),
+    the norm weighted by the nodes' masses over their mean, |u|_m^2 = sum_I m_I |u_I|^2 / m_mean:
+    the material's displacement. The plain norm counts the nodes at the edges of the bodies,
+    whose few particles (a cubic spline's tail) carry a tiny stiffness and whose increments are
+    the under-integrated modes', as much as a node inside; on the column past its limit point
+    they held most of a step's |u| and were inactive in the next step (the secant predictor's
+    length came out 8 times short, and the path turned back). The first step's arc is
+    ``load_factor_increment`` |K^-1 f_ref|_m."""
 
     name = "arc_length"
+    columns = ("arc length (m)",)
 
     def __init__(self, options, time_step, end_time):
         super().__init__(options, time_step, end_time)
         self.arc = None     # the arc length of a whole step (m)
         self.arc0 = None
         self.missed = 0     # corrections whose line missed the arc (no real root)
+
+    def _weights(self, problem):
+        """Owned weights m_I / m_mean per component (zero on held components)."""
+        d = problem.dofs
+        m = d.owned_values(np.repeat(problem.mass[..., None], 2, axis=2)).copy()
+        m[~problem.free] = 0.0
+        largest = problem.s.decomp.allreduce_max(float(m.max()) if m.size else 0.0)
+        m[m < EDGE_MASS * largest] = 0.0
+        count = problem.s.decomp.allreduce_sum(float(np.count_nonzero(m)))
+        mean = problem.s.decomp.allreduce_sum(float(m.sum())) / max(count, 1.0)
+        self.w = m / mean if mean > 0.0 else m
+
+    def norm_dot(self, problem, a, b):
+        return problem.dot(self.w * a, b)
+
+    def balance(self, problem, base, fixed, ref, rf, opts):
+        """The last step's converged state is not exactly in equilibrium on this step's grid (the
+        grid is reset and the particles have moved across it), and that out-of-balance force,
+        through a tangent softened by yielding, takes the first correction off a short arc (the
+        quadratic has no real root however short the arc). So the start is balanced first: in
+        the first step by Newton at the start's load factor (the fixed loads to equilibrium at
+        lambda = 0), later by corrections held normal to the last step's increment p (Riks'
+        normal plane, p . W (base + du_R + d_lambda du_F) = 0, so lambda moves too): at fixed
+        lambda a start past a limit point has no equilibrium near it to find, and Newton
+        diverged there."""
+        self._weights(problem)
+        r, norm = problem.residual(base)
+        tol = opts["residual_tolerance"] * problem.force_scale
+        logger.debug("  balance 0: lambda %.6g residual %.3g", self.load_factor, norm)
+        if norm <= tol:
+            return self.load_factor, 0
+        if self.previous is None:
+            return self.load_factor, newton(problem, base, opts)
+        p = problem.dofs.owned_values(self.previous).copy()
+        p[~problem.free] = 0.0
+        p *= self.w
+        lam = self.load_factor
+        for k in range(1, opts["max_iterations"] + 1):
+            problem.tangent(base)
+            uR, uF = problem.solve(r), problem.solve(rf)
+            slope = problem.dot(p, uF)
+            dl = -problem.dot(p, problem.dofs.owned_values(base) + uR) / slope if slope != 0.0 else 0.0
+            base[...] = problem.add(base, uR + dl * uF, 1.0)
+            lam += dl
+            problem.fext = fixed + lam * ref
+            r, norm = problem.residual(base)
+            logger.debug("  balance %d: lambda %.6g residual %.3g (d_lambda %.3g)", k, lam, norm, dl)
+            if not math.isfinite(norm):
+                break
+            if norm <= tol:
+                logger.debug("step start balanced in %d iterations: lambda %.6g -> %.6g", k, self.load_factor, lam)
+                return lam, k
+        raise NewtonFailed(f"arc length: the step's start did not balance (residual {norm:.3g})")
 
     def predict(self, problem, rf, h, base):
         """The first step: along the start tangent's K^-1 f_ref. Later steps: along the last
@@ -341,15 +418,18 @@ class ArcLength(LoadFactorControl):
         with no increment yet is elastic), and its predictor overshoots the limit load by the
         whole elastic reserve; the secant follows the path through the limit point (its sign
         is the path's)."""
+        self._weights(problem)
         if self.previous is not None:
             prev = problem.dofs.owned_values(self.previous).copy()
             prev[~problem.free] = 0.0
-            length = math.sqrt(problem.dot(prev, prev))
+            length = math.sqrt(self.norm_dot(problem, prev, prev))
             if length > 0.0:
                 self.dl = self.arc * h / self.time_step
+                logger.debug("secant predictor: |u_prev| %.4g, d_lambda_prev %.4g, dl %.4g", length,
+                             self.previous_dlam, self.dl)
                 return self.previous_dlam * self.dl / length, prev * (self.dl / length)
         uF = tangent_direction(problem, rf, base)
-        length = math.sqrt(problem.dot(uF, uF))
+        length = math.sqrt(self.norm_dot(problem, uF, uF))
         if length == 0.0 or not math.isfinite(length):
             raise NewtonFailed("arc length: the pattern moves nothing")
         if self.arc is None:
@@ -358,30 +438,32 @@ class ArcLength(LoadFactorControl):
         return self.dl / length, uF * (self.dl / length)
 
     def correct(self, problem, u, uR, uF, h):
+        dot = self.norm_dot
         base = u + uR
-        a = problem.dot(uF, uF)
-        b = 2.0 * problem.dot(uF, base)
-        c = problem.dot(base, base) - self.dl ** 2
+        a = dot(problem, uF, uF)
+        b = 2.0 * dot(problem, uF, base)
+        c = dot(problem, base, base) - self.dl ** 2
         disc = b * b - 4.0 * a * c
-        logger.debug("arc length: |u| %.3g |u_R| %.3g |u_F| %.3g dl %.3g disc %.3g", math.sqrt(problem.dot(u, u)),
-                     math.sqrt(problem.dot(uR, uR)), math.sqrt(a), self.dl, disc)
+        logger.debug("arc length: |u| %.3g |u_R| %.3g |u_F| %.3g dl %.3g disc %.3g", math.sqrt(dot(problem, u, u)),
+                     math.sqrt(dot(problem, uR, uR)), math.sqrt(a), self.dl, disc)
         if a == 0.0:
             raise NewtonFailed("arc length: the pattern moves nothing")
         if disc < 0.0:
             # no point of the correction's line on the arc: the out-of-balance force's correction
-            # alone leaves it (the start's residual, from the particles' new positions on the
-            # grid, through a tangent softened by yielding). Take the line's point nearest the
-            # arc (the quadratic's real part, Crisfield's remedy short of cutting the arc): the
-            # next iterations, from nearer equilibrium, meet the constraint again.
+            # alone leaves it. Linearise the constraint instead (the plane normal to the current
+            # increment u through its tip: u . W u_new = dl^2, Riks' plane; Crisfield's remedy
+            # short of cutting the arc): the next iterations, from nearer equilibrium, meet the
+            # arc again (or the step fails and is halved).
             self.missed += 1
+            along = dot(problem, uF, u)
+            if along != 0.0:
+                return (self.dl ** 2 - dot(problem, base, u)) / along
             return -0.5 * b / a
         q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
         roots = (q / a, c / q) if q != 0.0 else (0.0, 0.0)
         # Crisfield's choice: the root whose new increment turns least from the current one
-        u_u = problem.dot(u, u)
-        cosines = [problem.dot(u, base) + r * problem.dot(u, uF) for r in roots]
-        if u_u == 0.0:
-            return max(roots)
+        # (the new increments have the same length, so the larger dot product)
+        cosines = [dot(problem, u, base) + r * dot(problem, u, uF) for r in roots]
         return roots[int(np.argmax(cosines))]
 
     def adapt(self, iterations):
@@ -389,7 +471,7 @@ class ArcLength(LoadFactorControl):
         self.arc = min(self.arc * factor, MAX_ARC_GROWTH * self.arc0)
 
     def _record(self, t, iterations):
-        self.path.append((t, self.load_factor, iterations, self.arc))
+        self.path.append((t, self.load_factor, iterations, math.nan if self.arc is None else self.arc))
 
 
 def tangent_direction(problem, rf, base):

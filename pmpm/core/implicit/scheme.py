@@ -125,6 +125,14 @@ class ImplicitNewmark:
                         st["newton_iterations"] / max(st["steps"], 1), st["residual_evaluations"],
                         st["linear_iterations"], st["halvings"])
 
+    def summary(self, s):
+        """Entries of the run's summary: a load-factor control's path (``load_factor_path``:
+        rows of time, load factor, iterations and the control's own column, one a converged
+        step; pmpm.core.implicit.arclength) and its last load factor."""
+        if self.control is None:
+            return {}
+        return {"load_factor": self.control.load_factor, "load_factor_path": [tuple(r) for r in self.control.path]}
+
     @staticmethod
     def migrate_between_substeps(s):
         """Particles that crossed their slab's boundary in a sub-step go to their new owner
