@@ -4,22 +4,16 @@ a lateral load pattern H lambda near its top and an axial compression N held at 
 (pmpm.benchmarks.implicit_static.column_load_factor_scene), against the beam-column's
 closed forms and the plastic mechanism.
 
-Shown to fail on planted bugs (each restored):
+Shown to fail on planted bugs (each restored; pmpm/core/implicit/arclength.py):
 - displacement control's correction without the du_R term (d_lambda = (d - c.u) / c.du_F):
-  the controlled point misses its displacement (test_displacement_control_...: 4e-4 m off);
-- the load pattern's reference vector scattered without the load factor's scaling in the
-  commit (problem.fext left at the start's lambda): the base shear no longer equals H lambda
-  (both tests);
-- the geometric stiffness left out of the step (K_geo dropped in the tangent): no effect on the
-  converged answers (Newton still converges, more slowly), so not guarded here; the P-Delta
-  ratio guards the residual's own second-order terms: with the axial load outside the step's
-  start positions (scattered at x0) the ratio moves by ...
-- Crisfield's root choice reversed (the root turning most from the current increment): the
-  arc length doubles back at the limit point (lambda rises again, the drift falls): the limit
-  point test fails;
-- the step's start not balanced before the arc (arclength.LoadFactorControl.step without the
-  fixed-lambda Newton): the first correction past first yield leaves the arc (no real root)
-  at every halving (exit 3).
+  test_displacement_control_... fails;
+- the residual's loads left at the step's start load factor (problem.fext = f_fixed +
+  lambda_start f_ref in the iterations): test_displacement_control_... fails (equilibrium);
+- Crisfield's root choice reversed (the root turning most from the current increment), the
+  step's start not balanced before the arc (ArcLength.balance returning at once after the
+  first step), and the arc's norm unweighted (every node alike, the edge nodes included):
+  each makes test_arc_length_... fail (the run stops at the smallest step, or the path turns
+  back before the limit point).
 """
 import numpy as np
 import pytest
