@@ -36,8 +36,11 @@ import time
 
 import numpy as np
 
-import pmpm
-from pmpm.scene.config import read_toml
+from mpi4py import MPI
+
+from pmpm.errors import UnstableRunError
+from pmpm.runner import Run
+from pmpm.scene.config import parse_scene, read_toml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CASE = os.path.join(ROOT, "cases", "hard", "column_loss.toml")
@@ -45,7 +48,7 @@ CASE = os.path.join(ROOT, "cases", "hard", "column_loss.toml")
 POINT = (6.096, 3.658)
 
 
-def pushdown_data(cell=0.05, drop=0.3, steps=30, material=None):
+def pushdown_data(cell=0.05, drop=0.3, steps=30, material=None, implicit=None):
     """The case's frame without its middle column, under its gravity loads scaled by the load
     factor, the point above the removed column pushed down ``drop`` (m) in ``steps`` static
     steps (TOML data)."""
@@ -66,6 +69,8 @@ def pushdown_data(cell=0.05, drop=0.3, steps=30, material=None):
                       "time_step": 1.0 / steps, "end_time": 1.0,
                       "static": {"control": "displacement", "point": list(POINT), "component": "y",
                                  "displacement": -drop, "gravity": "pattern"}}
+    if implicit:
+        data["solver"]["implicit"] = dict(implicit)
     return data
 
 
@@ -93,15 +98,32 @@ def main(argv=None):
     ap.add_argument("--omega", type=float, default=2.0, help="GSA's dynamic increase factor Omega_N")
     ap.add_argument("--dead-share", type=float, default=1.0, help="share of the case's loads taken as dead")
     ap.add_argument("--dynamic-peak", type=float, default=0.12369, help="the explicit run's peak drop (m)")
+    ap.add_argument("--material", choices=("case", "bilinear"), default="case",
+                    help="the case's smooth von Mises steel, or bilinear J2 with its yield stress and hardening")
+    ap.add_argument("--line-search", action="store_true", help="Newton with a line search, 40 iterations")
     args = ap.parse_args(argv)
+    material = None
+    if args.material == "bilinear":   # the case's steel with the bilinear J2 model (consistent tangent)
+        material = {k: v for k, v in read_toml(CASE)["materials"]["steel"].items() if k != "smoothness"}
+        material["type"] = "bilinear_vonmises"
+    implicit = {"line_search": True, "max_iterations": 40} if args.line_search else None
+    scene = parse_scene(pushdown_data(args.cell, args.drop, args.steps, material, implicit), "alternate_path.toml")
+    run = Run(scene, MPI.COMM_WORLD, write=False)
     start = time.perf_counter()
-    r = pmpm.run(pushdown_data(args.cell, args.drop, args.steps), dataframes=False)
+    stopped = None
+    try:   # a step that fails at the smallest length ends the curve there (the path so far is kept)
+        while run.solver.t < scene.solver.end_time * (1 - 1e-12):
+            run.solver.step()
+    except UnstableRunError as exc:
+        stopped = str(exc)
     wall = time.perf_counter() - start
-    path = np.array([row[:4] for row in r.summary["load_factor_path"]])
+    path = np.array([row[:4] for row in run.solver.scheme.control.path])
     lam, u = path[:, 1], -path[:, 3]
     ps = pseudo_static(u, lam)
     print(f"alternate path, pushdown of the point above the removed column ({args.cell:g} m cells, "
-          f"{args.steps} steps, {wall:.0f} s wall)")
+          f"{args.steps} steps, {args.material} steel, {wall:.0f} s wall)")
+    if stopped:
+        print(f"stopped: {stopped}")
     print(f"{'drop (mm)':>10} {'lambda':>9} {'lambda_ps':>10} {'iterations':>10}")
     for k in range(len(u)):
         print(f"{1e3 * u[k]:10.2f} {lam[k]:9.4f} {ps[k]:10.4f} {int(path[k, 2]):10d}")
@@ -118,7 +140,8 @@ def main(argv=None):
           + f"; explicit dynamic run: {1e3 * args.dynamic_peak:.2f} mm"
           + (f" (ratio {u_dyn / args.dynamic_peak:.3f})" if u_dyn else ""))
     print(f"largest suddenly applied load factor arrested within the drop (max lambda_ps): {ps.max():.4f}")
-    print(json.dumps({"cell": args.cell, "steps": args.steps, "wall_s": round(wall, 1),
+    print(json.dumps({"cell": args.cell, "steps": args.steps, "material": args.material, "wall_s": round(wall, 1),
+                      "stopped": stopped, "reached_drop_mm": 1e3 * float(u[-1]),
                       "capacity_load_factor": capacity, "omega": args.omega, "demand": demand,
                       "static_drop_at_1_mm": None if crossing(u, lam, 1.0) is None else 1e3 * crossing(u, lam, 1.0),
                       "pseudo_static_peak_mm": None if u_dyn is None else 1e3 * u_dyn,
