@@ -16,10 +16,12 @@ pmpm/core/implicit/arclength.py): the pushdown curve lambda(u). Printed:
   Omega_N (1.2 D + 0.5 L), as a multiple of the case's loads D + L (``--dead-share`` of them
   dead; the case's floor load is not split into D and L), against that capacity;
 - Izzuddin et al.'s (2008) pseudo-static response: for gravity applied suddenly at lambda_0,
-  the dynamic peak u_d is where the gravity's work equals the strain energy, lambda_0 u_d =
-  int_0^u_d lambda(u) du, i.e. where the pseudo-static curve lambda_ps(u) = (1/u) int_0^u
-  lambda du reaches lambda_0 (the frame's mass moves with the point above the column in one
-  mode, and damping is left out). lambda_ps's peak is the largest suddenly applied load the
+  the dynamic peak is where the gravity's work equals the strain energy, lambda_0 u_d =
+  int_0^u_d lambda(u) du in the pattern's work-conjugate drop u (the load-weighted mean drop of
+  the particles, sum_p w_p (y0 - y)_p, w_p the particle's share of the pattern), i.e. where the
+  pseudo-static curve lambda_ps(u) = (1/u) int_0^u lambda du reaches lambda_0; read as the point's
+  drop on the static curve at that u (the response's shape taken as the static one's, damping
+  and the kinetic energy left in other modes left out). lambda_ps's peak is the largest suddenly applied load the
   frame arrests. Beside it the explicit run's peak (``--dynamic-peak``, m, down; the default is
   docs/structural_results.md's 0.05 m figure, -123.69 mm: the dynamic case ramps the loads onto
   the intact frame, with its 2 % mass-proportional damping, and removes the column in 5 ms).
@@ -74,6 +76,27 @@ def pushdown_data(cell=0.05, drop=0.3, steps=30, material=None, implicit=None):
     return data
 
 
+def pattern_weights(solver):
+    """Each particle's share of the load pattern's vertical force at load factor 1 (its weight and
+    its share of the floor load), over the pattern's total: the weights of the generalised drop."""
+    p = solver.particles
+    g = float(-solver.gravity[1])
+    f = p["m"] * g
+    loads = solver.effect("loads")
+    if loads is not None and loads.forces:
+        vec = np.array([-fc.force[1] for fc in loads.forces])
+        mine = p["load_id"] >= 0
+        f = f + np.where(mine, p["load_w"] * vec[np.maximum(p["load_id"], 0)], 0.0)
+    return f / solver.decomp.allreduce_sum(float(f.sum()))
+
+
+def generalised_drop(solver, weights):
+    """The pattern's work-conjugate drop sum_p w_p (y0_p - y_p) (Izzuddin et al.: the gravity's
+    work is lambda times the pattern's total times it)."""
+    p = solver.particles
+    return float(solver.decomp.allreduce_sum(float(np.dot(weights, p["x0"][:, 1] - p["x"][:, 1]))))
+
+
 def pseudo_static(u, lam):
     """Izzuddin et al.'s pseudo-static curve lambda_ps(u) = (1/u) int_0^u lambda du (trapezoids
     from the origin) at the points ``u`` (> 0, rising)."""
@@ -111,25 +134,34 @@ def main(argv=None):
     run = Run(scene, MPI.COMM_WORLD, write=False)
     start = time.perf_counter()
     stopped = None
+    weights = pattern_weights(run.solver)
+    rows = []   # (load factor, the point's drop, the pattern's generalised drop, iterations) a scene step
     try:   # a step that fails at the smallest length ends the curve there (the path so far is kept)
         while run.solver.t < scene.solver.end_time * (1 - 1e-12):
+            done = len(run.solver.scheme.control.path)
             run.solver.step()
+            control = run.solver.scheme.control
+            rows.append((control.load_factor, -control.point_displacement, generalised_drop(run.solver, weights),
+                         sum(row[2] for row in control.path[done:])))
     except UnstableRunError as exc:
         stopped = str(exc)
     wall = time.perf_counter() - start
-    path = np.array([row[:4] for row in run.solver.scheme.control.path])
-    lam, u = path[:, 1], -path[:, 3]
-    ps = pseudo_static(u, lam)
+    path = np.array(rows)
+    lam, u, ug = path[:, 0], path[:, 1], path[:, 2]
+    ps = pseudo_static(ug, lam)
     print(f"alternate path, pushdown of the point above the removed column ({args.cell:g} m cells, "
           f"{args.steps} steps, {args.material} steel, {wall:.0f} s wall)")
     if stopped:
         print(f"stopped: {stopped}")
-    print(f"{'drop (mm)':>10} {'lambda':>9} {'lambda_ps':>10} {'iterations':>10}")
+    print(f"{'drop (mm)':>10} {'pattern drop (mm)':>18} {'lambda':>9} {'lambda_ps':>10} {'iterations':>10}")
     for k in range(len(u)):
-        print(f"{1e3 * u[k]:10.2f} {lam[k]:9.4f} {ps[k]:10.4f} {int(path[k, 2]):10d}")
+        print(f"{1e3 * u[k]:10.2f} {1e3 * ug[k]:18.3f} {lam[k]:9.4f} {ps[k]:10.4f} {int(path[k, 3]):10d}")
     demand = args.omega * (1.2 * args.dead_share + 0.5 * (1.0 - args.dead_share))
     capacity = float(lam.max())
-    u_dyn = crossing(u, ps, 1.0)
+    # the dynamic peak: where lambda_ps reaches 1 in the pattern's drop, read as the point's drop
+    # on the static curve (the shape of the static response at that drop)
+    ug_dyn = crossing(ug, ps, 1.0)
+    u_dyn = None if ug_dyn is None else float(np.interp(ug_dyn, ug, u))
     print(f"capacity within the drop: lambda_max = {capacity:.4f} at {1e3 * u[int(np.argmax(lam))]:.1f} mm")
     print(f"GSA demand Omega_N (1.2 D + 0.5 L) / (D + L) = {demand:.3f} (Omega_N = {args.omega:g}, "
           f"dead share {args.dead_share:g}): {'met' if capacity >= demand else 'NOT met'} within {1e3 * args.drop:.0f} mm")
@@ -146,7 +178,7 @@ def main(argv=None):
                       "static_drop_at_1_mm": None if crossing(u, lam, 1.0) is None else 1e3 * crossing(u, lam, 1.0),
                       "pseudo_static_peak_mm": None if u_dyn is None else 1e3 * u_dyn,
                       "dynamic_peak_mm": 1e3 * args.dynamic_peak, "max_pseudo_static": float(ps.max()),
-                      "newton_iterations": int(path[:, 2].sum())}))
+                      "newton_iterations": int(path[:, 3].sum())}))
 
 
 if __name__ == "__main__":
