@@ -68,8 +68,8 @@ def test_arc_length_passes_the_limit_point_of_a_beam_column():
     Asserted: the base shear is H lambda and the vertical reaction N at every step (the final
     lambda the control's own; 1e-6); the drift grows at every step while lambda rises to an
     interior maximum and falls below 40 % of it (the limit point passed); the first step is the
-    elastic beam-column's drift within 3 % (the 4-cell clamp's softness, 1.9 % measured; the
-    pushover tests allow the same); the peak lies between first yield of the second-order
+    elastic beam-column's drift within 1.5 % (the strip against the beam theory: 0.5 % with N = 0,
+    0.07 % measured here; python -m studies.beam_column_control); the peak lies between first yield of the second-order
     elastic column, My(N) = (sigma_y - N / A) b^2 / 6 at the base, and the first-order
     mechanism's Mp(N) / (arm - 2 h) (the hinge no higher than the clamped node row's splines
     reach, as in the column pushover test); and every point lies on the path that displacement
@@ -86,7 +86,7 @@ def test_arc_length_passes_the_limit_point_of_a_beam_column():
     peak = int(np.argmax(lam))
     assert 0 < peak < len(lam) - 2, lam
     assert lam[-1] < 0.4 * lam[peak], lam
-    assert u[0] == pytest.approx(beam_column_drift(H * lam[0], N, COLUMN_LATERAL_ARM + h / 4), rel=0.03)
+    assert u[0] == pytest.approx(beam_column_drift(H * lam[0], N, COLUMN_LATERAL_ARM + h / 4), rel=0.015)
     a = COLUMN_LATERAL_ARM
     area, modulus = 0.4, 0.4 ** 2 / 6
     first_yield = (250e6 - N / area) * modulus / (a + N * beam_column_drift(1.0, N, COLUMN_AXIAL_ARM))
