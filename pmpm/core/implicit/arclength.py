@@ -172,6 +172,9 @@ class LoadFactorControl:
         base = np.zeros_like(u)
         lam_start, balance = self.balance(problem, base, fixed, ref, rf, opts)
         self.t_step = t0 + h
+        # a step that starts where the last attempt started is its retry after a failure
+        self.retry = getattr(self, "_attempt", None) == (t0, self.load_factor)
+        self._attempt = (t0, self.load_factor)
         dlam, du = self.predict(problem, rf, h, base)
         u[...] = problem.add(base, du, 1.0)
         problem.force_scale = self._scale(problem, fixed, ref, max(abs(lam_start), abs(lam_start + dlam)))
@@ -409,7 +412,13 @@ class ArcLength(LoadFactorControl):
             if norm <= tol:
                 logger.debug("step start balanced in %d iterations: lambda %.6g -> %.6g", k, self.load_factor, lam)
                 return lam, k
-        raise NewtonFailed(f"arc length: the step's start did not balance (residual {norm:.3g})")
+        # the balance diverged (a start the normal plane cannot bring back, a yielding hinge's
+        # tangent): the arc starts from the unbalanced start instead, its iterations carry the
+        # imbalance (and the step is halved if they cannot)
+        logger.debug("the step's start did not balance (residual %.3g): the arc starts from it", norm)
+        base[...] = 0.0
+        problem.fext = fixed + self.load_factor * ref
+        return self.load_factor, opts["max_iterations"]
 
     def predict(self, problem, rf, h, base):
         """The first step: along the start tangent's K^-1 f_ref. Later steps: along the last
@@ -419,7 +428,7 @@ class ArcLength(LoadFactorControl):
         whole elastic reserve; the secant follows the path through the limit point (its sign
         is the path's)."""
         self._weights(problem)
-        if self.previous is not None:
+        if self.previous is not None and not self.retry:
             prev = problem.dofs.owned_values(self.previous).copy()
             prev[~problem.free] = 0.0
             length = math.sqrt(self.norm_dot(problem, prev, prev))
@@ -435,7 +444,14 @@ class ArcLength(LoadFactorControl):
         if self.arc is None:
             self.arc0 = self.arc = self.options["load_factor_increment"] * length
         self.dl = self.arc * h / self.time_step
-        return self.dl / length, uF * (self.dl / length)
+        # (a retry after a failed secant step: the tangent's direction, its sign the path's, the
+        # sign of u_prev . W du_F; Feng et al.)
+        sign = 1.0
+        if self.previous is not None:
+            prev = problem.dofs.owned_values(self.previous).copy()
+            prev[~problem.free] = 0.0
+            sign = -1.0 if self.norm_dot(problem, prev, uF) < 0.0 else 1.0
+        return sign * self.dl / length, uF * (sign * self.dl / length)
 
     def correct(self, problem, u, uR, uF, h):
         dot = self.norm_dot
