@@ -8,32 +8,33 @@ f_ref the pattern (the ``pattern``'s force sets at their full value, and the wei
 force sets outside the pattern at their time functions), u the step's nodal displacement
 increment (pmpm.core.implicit.problem.GridProblem), c the step's constraint:
 
-- ``displacement``: the controlled point's displacement increment is prescribed,
-  e . sum_I N_I(x_p) u_I = d (linear in u: the bordered system);
-- ``arc_length``: Crisfield's cylindrical arc length, |u|^2 = dl^2 over the free components
-  (Crisfield 1981), so that the path passes limit points where lambda falls.
+- ``displacement``: the controlled point's displacement is prescribed, e . sum_I N_I(x_p) u_I
+  = d (linear in u: the bordered system), d what the schedule displacement t / end_time
+  leaves at the step's end;
+- ``arc_length``: Crisfield's (1981) cylindrical arc length |u|_m = dl over the free
+  components, the norm weighted by the nodes' masses (``ArcLength``), so that the path passes
+  limit points where lambda falls.
 
 Both are solved by Batoz and Dhatt's (1979) two back-substitutions with the same factorisation
 at each iteration: K du_R = R (the out-of-balance force), K du_F = f_ref, the correction
 du = du_R + d_lambda du_F with d_lambda from the constraint (linear: one value; arc length: the
-quadratic's root whose new increment makes the smaller angle with the current one, Crisfield's
-choice). The predictor is d_lambda du_F of the start state's tangent: its sign under arc length
-follows the previous step's increment (the sign of u_prev . du_F: positive on the rising branch,
-negative past a limit point where the tangent's du_F turns against the path; Feng et al. 1996).
-The arc length follows the iterations the last step took, dl <- dl sqrt(target / iterations)
-(Crisfield), within [1/2, 2] of its last value and at most ``MAX_ARC_GROWTH`` times the first.
+quadratic's root whose new increment turns least from the current one, Crisfield's choice, or
+Riks' normal plane where the line misses the arc). Predictors: displacement control, K^-1 f_ref
+scaled to the increment; arc length, K^-1 f_ref in the first step and in a retried one (its
+sign the path's: u_prev . W du_F, Feng et al. 1996), else the last step's increment scaled to
+the arc (the secant). The arc follows the iterations the last step took, dl <- dl sqrt(target /
+iterations) (Crisfield), within [1/2, 2] of its last value and at most ``MAX_ARC_GROWTH`` times
+the first.
 
-Each step first brings its start back to equilibrium at the start's load factor (plain
-Newton at fixed lambda; the first step: the fixed loads at lambda = 0), and the constraint
-measures the increment from there: the particles have moved across the grid since the last
-step converged, and on the new step's grid the converged state is off balance by a force that
-a tangent softened by yielding turns into a correction larger than a short arc (the
-quadratic then has no real root, however short the arc). A step's length h in pseudo-time
-scales the step: the point's displacement is displacement t / end_time at every step's end (the
-balance's move included) and the arc length
-dl h / time_step, so that a step the scheme halves after a failure
-(pmpm.core.implicit.scheme) is a half step. ``max_load_factor``: a step that would pass it is
-solved again at lambda = max_load_factor (load control), and the steps after it hold that load.
+An arc-length step first balances its start (``ArcLength.balance``): the particles have moved
+across the grid since the last step converged, and on the new step's grid the converged state
+is off balance by a force that a tangent softened by yielding turns into a correction longer
+than a short arc (no real root, however short the arc). Displacement control needs no balance:
+its linear constraint on the whole increment absorbs it. A step's length h in pseudo-time
+scales the step (the point's schedule is in t; the arc is dl h / time_step), so that a step the
+scheme halves after a failure (pmpm.core.implicit.scheme) is a half step. ``max_load_factor``:
+a step that would pass it is solved again at lambda = max_load_factor (load control), and the
+steps after it hold that load.
 
 The convergence test is Newton's (pmpm.core.implicit.newton): the residual against the force
 scale and the energy of the next correction; the constraint holds exactly after every
