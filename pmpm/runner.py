@@ -691,6 +691,9 @@ class Run:
                    "external_work": e["external_work"], "numerical_loss": e["numerical_loss"]}
         for effect in s.effects:   # the effects' own entries (first fracture, ...): collective
             summary.update(effect.summary(s))
+        scheme_summary = getattr(s.scheme, "summary", None)   # the scheme's (a static run's load factors)
+        if scheme_summary is not None:
+            summary.update(scheme_summary(s))
         if self.rank == 0:
             logger.info("energy: %s", energy_summary(e))
         if s.removed and self.rank == 0:  # a global count

@@ -30,7 +30,7 @@ from pmpm.scene.frame import expand_frame
 from pmpm.scene.grid import GridConfig, parse_grid
 from pmpm.scene.analyses import parse_events, parse_pushover
 from pmpm.core.implicit.options import (IMPLICIT_DEFAULTS, check_implicit_scene, read_implicit, read_integrator,
-                                        read_petsc)
+                                        read_petsc, read_static)
 
 __all__ = ["Scene", "load_scene", "resolve_scenes", "check_run_names", "check_written_scene", "parse_scene", "SHAPE_NAMES", "SCHEME_NAMES", "BODY_SHAPES", "STOP_QUANTITIES"]
 logger = logging.getLogger(__name__)
@@ -111,6 +111,7 @@ class SolverConfig:
     analysis: str = "dynamic"      # or "static" (implicit only)
     implicit: dict = field(default_factory=lambda: dict(IMPLICIT_DEFAULTS))   # [solver.implicit]
     petsc: dict = field(default_factory=dict)                                 # [solver.petsc]
+    static: Optional[dict] = None   # [solver.static]: a load-factor control (None: the loads' time functions)
 
 
 @dataclass(frozen=True)
@@ -612,7 +613,8 @@ def _solver(t):
         transfer=t.string("transfer", "flip", choices=TRANSFERS),
         xpic_order=t.integer("xpic_order", 2, low=1, high=MAX_XPIC_ORDER),
         integrator=integrator, analysis=analysis,
-        implicit=read_implicit(t.table("implicit", None)), petsc=read_petsc(t.table("petsc", None)))
+        implicit=read_implicit(t.table("implicit", None)), petsc=read_petsc(t.table("petsc", None)),
+        static=read_static(t.table("static", None), analysis))
     if t.has("xpic_order") and s.transfer != "xpic":
         raise ConfigError(t.path("xpic_order"), "is XPIC's order; set transfer = \"xpic\" (or leave it out)")
     if s.transfer == "xpic":

@@ -3,7 +3,9 @@ exit code 2, nothing written (docs/implicit.md, "What is refused").
 
 Shown to fail on planted bugs (restored): the PETSc options left unchecked (validate_options
 not called: the misspelt option runs, exit 0, files written), and the contact refusal removed
-(the run starts and fails inside the step with a traceback, not exit 2).
+(the run starts and fails inside the step with a traceback, not exit 2). The load-factor
+control's scene check (options._check_static) not called: the static-no-load, -unknown-pattern
+and -point-outside cases run past the parse (not exit 2 with the key).
 """
 import subprocess
 import sys
@@ -58,6 +60,22 @@ point = [2.0, 0.5]
 """
 
 
+#: [solver.static] after BASE's [solver] table ({analysis}: the key that makes it static)
+STATIC = """{analysis}
+[solver.static]
+control = "{control}"
+{keys}
+"""
+STATIC_ANALYSIS = 'analysis = "static"'
+#: a force set for the pattern
+FORCE = """
+[[loads.forces]]
+name = "tip"
+body = "block"
+force = [0.0, -1.0]
+"""
+
+
 def _edit(old, new):
     def edit(text):
         assert old in text, old
@@ -104,6 +122,36 @@ CASES = {
                                   "solver.implicit.initial_static: starts a dynamic analysis from static equilibrium"),
     "neo-hookean": (_edit('type = "linear_elastic"', 'type = "neo_hookean"'), [],
                     "materials.steel.type: neo_hookean has no tangent for the implicit integrator yet"),
+    # load-factor control ([solver.static], pmpm/core/implicit/arclength.py)
+    "static-control-in-dynamics": (_append(STATIC.format(analysis="", control="arc_length",
+                                                         keys="load_factor_increment = 0.1")), [],
+                                   "solver.static: drives a static analysis"),
+    "static-unknown-control": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="arc", keys="")), [],
+                               "solver.static.control: must be one of load, displacement, arc_length"),
+    "static-negative-increment": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="arc_length",
+                                                        keys="load_factor_increment = -0.1") + FORCE), [],
+                                  "solver.static.load_factor_increment: must be > 0"),
+    "static-no-point": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="displacement",
+                                              keys='component = "y"\ndisplacement = -0.01') + FORCE), [],
+                        "solver.static.point: missing (required)"),
+    "static-zero-displacement": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="displacement",
+                                                       keys='point = [2.0, 0.5]\ncomponent = "y"\ndisplacement = 0.0')
+                                         + FORCE), [], "solver.static.displacement: must not be zero"),
+    "static-point-outside": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="displacement",
+                                                   keys='point = [9.0, 0.5]\ncomponent = "y"\ndisplacement = -0.01')
+                                     + FORCE), [], "solver.static.point: [9.0, 0.5] lies outside the grid"),
+    "static-unknown-key": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="arc_length",
+                                                 keys="load_factor_increment = 0.1\narc = 0.1") + FORCE), [],
+                           "solver.static.arc: unknown key"),
+    "static-no-load": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="arc_length",
+                                             keys="load_factor_increment = 0.1")), [],
+                       "solver.static.pattern: no load to scale"),
+    "static-unknown-pattern": (_append(STATIC.format(analysis=STATIC_ANALYSIS, control="arc_length",
+                                                     keys='load_factor_increment = 0.1\npattern = ["floor"]') + FORCE),
+                               [], "solver.static.pattern: no [[loads.forces]] named 'floor' (defined: tip)"),
+    "static-gravity-pattern-without-gravity": (_append(STATIC.format(
+        analysis=STATIC_ANALYSIS, control="arc_length", keys='load_factor_increment = 0.1\ngravity = "pattern"') + FORCE),
+        [], "solver.static.gravity: is \"pattern\" but the scene has no loads.gravity"),
 }
 
 

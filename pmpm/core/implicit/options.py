@@ -16,6 +16,19 @@
     initial_static = false         # dynamics: first bring the loads at the start time (gravity,
                                    # the force sets' values) to static equilibrium, then go on
 
+    [solver.static]                # analysis = "static": what drives the steps (docs/implicit.md)
+    control = "load"               # "load": the loads' time functions (default) | "displacement":
+                                   # a point's displacement, the load factor solved for |
+                                   # "arc_length": Crisfield's cylindrical arc length
+    pattern = ["floor load"]       # the [[loads.forces]] scaled by the load factor (default all)
+    gravity = "fixed"              # "fixed": held at its value | "pattern": scaled with the pattern
+    max_load_factor = 1.0          # the load factor is not taken past this (default: no limit)
+    point = [6.1, 3.66]            # displacement: the particle nearest this point (initial position)
+    component = "y"                # displacement: its component controlled
+    displacement = -0.3            # displacement: the point's displacement at end_time (linear in t)
+    load_factor_increment = 0.1    # arc_length: the first step's load factor (sets the arc length)
+    target_iterations = 4          # arc_length: the arc length follows sqrt(target / iterations)
+
     [solver.petsc]                 # PETSc options of the linear solve (without the dash)
     ksp_type = "cg"
     pc_type = "gamg"
@@ -28,7 +41,7 @@ from pmpm.core.implicit.linear_solver import check_option_names, validate_option
 from pmpm.errors import ConfigError
 
 __all__ = ["read_integrator", "INTEGRATORS", "ANALYSES", "IMPLICIT_DEFAULTS", "read_implicit", "read_petsc", "check_implicit_scene",
-           "IMPLICIT_SCHEME"]
+           "IMPLICIT_SCHEME", "read_static", "STATIC_CONTROLS"]
 
 INTEGRATORS = ("explicit", "implicit")
 ANALYSES = ("dynamic", "static")
@@ -77,6 +90,44 @@ def read_implicit(t):
     return out
 
 
+#: ``solver.static.control``: "load" is the loads' time functions (the scheme's own load control),
+#: the others solve for a load factor (pmpm.core.implicit.arclength)
+STATIC_CONTROLS = ("load", "displacement", "arc_length")
+
+
+def read_static(t, analysis):
+    """``[solver.static]`` (a Table or None) as a dict, or None for load control by the loads'
+    time functions (no table, or ``control = "load"``). Only under ``analysis = "static"``."""
+    if t is None:
+        return None
+    if analysis != "static":
+        raise ConfigError(t.key, "drives a static analysis (solver.analysis = \"static\")")
+    control = t.string("control", "load", choices=STATIC_CONTROLS)
+    out = {"control": control}
+    if control == "load":
+        t.finish()
+        return None
+    pattern = t.raw("pattern", None)
+    if pattern is not None and (not isinstance(pattern, list) or not pattern
+                                or not all(isinstance(n, str) for n in pattern)):
+        raise ConfigError(t.path("pattern"), f"must be a non-empty list of [[loads.forces]] names (got {pattern!r})")
+    out["pattern"] = None if pattern is None else tuple(pattern)
+    out["gravity"] = t.string("gravity", "fixed", choices=("fixed", "pattern"))
+    out["max_load_factor"] = t.number("max_load_factor", float("inf"), low=0.0, low_open=True, magnitude=1e12)
+    if control == "displacement":
+        out["point"] = t.vector("point")
+        out["component"] = "xy".index(t.string("component", choices=("x", "y")))
+        out["displacement"] = t.number("displacement", magnitude=1e6)
+        if out["displacement"] == 0.0:
+            raise ConfigError(t.path("displacement"), "must not be zero (the controlled point's displacement at "
+                                                      "end_time)")
+    else:
+        out["load_factor_increment"] = t.number("load_factor_increment", low=0.0, low_open=True, magnitude=1e6)
+        out["target_iterations"] = t.integer("target_iterations", 4, low=1, high=100)
+    t.finish()
+    return out
+
+
 def read_petsc(t):
     """``[solver.petsc]``: PETSc option names (no dash) and values, checked for form."""
     if t is None:
@@ -102,6 +153,33 @@ def _unsupported(scene):
     yield "F" in out.fields, "output.fields", "F is not kept by the implicit step"
 
 
+def _check_static(scene):
+    """A load-factor control needs a load pattern and nothing else moving the structure."""
+    st, loads = scene.solver.static, scene.loads
+    names = [f.name for f in loads.forces]
+    for n in st["pattern"] or ():
+        if n not in names:
+            raise ConfigError("solver.static.pattern", f"no [[loads.forces]] named {n!r}"
+                                                       + (f" (defined: {', '.join(names)})" if names else ""))
+    if not (st["pattern"] or names) and not (st["gravity"] == "pattern" and loads.gravity is not None):
+        raise ConfigError("solver.static.pattern", "no load to scale: the scene has no [[loads.forces]] and "
+                                                   "gravity is not in the pattern (gravity = \"pattern\")")
+    if st["gravity"] == "pattern" and loads.gravity is None:
+        raise ConfigError("solver.static.gravity", "is \"pattern\" but the scene has no loads.gravity")
+    if scene.pushover is not None:
+        raise ConfigError("pushover", f"moves a boundary by its own displacement control; it cannot run "
+                                      f"with solver.static.control = {st['control']!r}")
+    if scene.output.checkpoint_interval is not None:
+        raise ConfigError("output.checkpoint_interval", "the load factor of solver.static.control = "
+                                                        f"{st['control']!r} is not checkpointed yet")
+    px = st.get("point")
+    if px is not None:
+        lo = scene.grid.origin
+        hi = [lo[i] + scene.grid.cells[i] * scene.grid.cell_size for i in (0, 1)]
+        if not all(lo[i] <= px[i] <= hi[i] for i in (0, 1)):
+            raise ConfigError("solver.static.point", f"{list(px)} lies outside the grid")
+
+
 def check_implicit_scene(scene, materials):
     """Refuse what the implicit integrator cannot run (ConfigError naming the key); for an
     explicit scene, refuse the implicit-only keys.
@@ -123,6 +201,8 @@ def check_implicit_scene(scene, materials):
     for bad, key, why in _unsupported(scene):
         if bad:
             raise ConfigError(key, f"{why} (solver.integrator = \"implicit\")")
+    if cfg.static is not None:
+        _check_static(scene)
     for label, m in zip(scene.materials, materials):
         if not m.has_tangent:
             raise ConfigError(f"materials.{label}.type", f"{m.name} has no tangent for the implicit integrator yet")

@@ -22,6 +22,7 @@ import numpy as np
 from pmpm.core import kernels as K
 from pmpm.core.effects import ConvergedStep
 from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.arclength import make_control
 from pmpm.core.implicit.control import linear_predictor
 from pmpm.core.implicit.linear_solver import LinearSolver
 from pmpm.core.implicit.newmark import Newmark
@@ -46,8 +47,10 @@ class ImplicitNewmark:
 
     name = "newmark"
 
-    def __init__(self, options=None, analysis="dynamic", petsc=None):
+    def __init__(self, options=None, analysis="dynamic", petsc=None, static=None, time_step=None, end_time=None):
         self.options = dict(IMPLICIT_DEFAULTS if options is None else options)
+        # a load factor as an unknown of the static steps ([solver.static], pmpm.core.implicit.arclength)
+        self.control = make_control(static, time_step, end_time)
         self.dynamic = analysis == "dynamic"
         self.petsc = dict(petsc or {})
         self.alpha = self.options["hht_alpha"]
@@ -65,7 +68,7 @@ class ImplicitNewmark:
         """The integrator with the scene's ``[solver.implicit]`` tolerances, ``solver.analysis``
         and ``[solver.petsc]`` options (``cfg``: the scene's ``[solver]`` settings; the solver
         holds no scene)."""
-        return cls(cfg.implicit, cfg.analysis, cfg.petsc)
+        return cls(cfg.implicit, cfg.analysis, cfg.petsc, cfg.static, cfg.time_step, cfg.end_time)
 
     def check_parts(self, effects, transfer, grid_fields):
         """Refuse every part of the run that does not say ``implicit_support`` (the effects,
@@ -122,6 +125,14 @@ class ImplicitNewmark:
                         st["newton_iterations"], st["newton_iterations"] / max(st["steps"], 1),
                         st["factorisations"], st["residual_evaluations"],
                         st["linear_iterations"], st["halvings"])
+
+    def summary(self, s):
+        """Entries of the run's summary: a load-factor control's path (``load_factor_path``:
+        rows of time, load factor, iterations and the control's own column, one a converged
+        step; pmpm.core.implicit.arclength) and its last load factor."""
+        if self.control is None:
+            return {}
+        return {"load_factor": self.control.load_factor, "load_factor_path": [tuple(r) for r in self.control.path]}
 
     @staticmethod
     def migrate_between_substeps(s):
@@ -265,7 +276,10 @@ class ImplicitNewmark:
             u = linear_predictor(problem, u, s.grid.inv_h)
         self.history = []
         try:
-            iterations = newton(problem, u, self.options, self.history)
+            if self.control is not None:
+                iterations = self.control.step(s, problem, u, h, t0, self.options, self.history)
+            else:
+                iterations = newton(problem, u, self.options, self.history)
         except ArithmeticError as exc:   # a Krylov solve that diverged counts as a failure
             raise NewtonFailed(str(exc)) from None
         finally:
@@ -374,6 +388,9 @@ class ImplicitNewmark:
         p = s.particles
         mean = 0.5 * (problem.stress0[:, :3] + problem.S[:, :3])
         s.internal_work += float(np.sum(p["vol"] * np.einsum("pk,pk->p", mean, problem.E)))
+        if self.control is not None:   # the loads scaled by the step's load factors
+            s.external_work += self.control.external_work(s, t0, h, self.control.lam0, self.control.load_factor)
+            return
         if s.gravity is not None:
             s.external_work += float(np.sum(p["m"] * (s._dx @ s.gravity)))
         loads = s.effect("loads")
