@@ -4,12 +4,12 @@ over a few implicit steps whose JSON line carries every key, whose figure is the
 against the EXPLICIT run's (recomputed here from the two histories by a formula of this test's
 own) and whose runs are the integrators they claim to be. No timing is asserted.
 
-Shown to fail on planted bugs (each tried once, then restored): comparing the implicit history
-with itself (summary() passing last_i twice: test_three_scenes_tiny fails on ``rms > 0`` and
-on the recomputation), interpolating the implicit history at the explicit times instead
-(drift_difference with the roles swapped: test_drift_difference_closed_form fails, the offset's
-RMS is then taken over the fine grid past the implicit span), and dividing by the implicit
-run's peak instead of the explicit one's (the closed-form test fails: peak A against A + c).
+Shown to fail on planted bugs in drift_difference (each tried once, then restored, 2026-12-07):
+dividing by the implicit run's peak instead of the explicit one's, comparing the implicit history
+with itself (reference = u_implicit), and counting the implicit samples past the explicit run's
+end: test_drift_difference_closed_form failed on each. The planted self-comparison in summary()
+(last_i passed twice), which test_three_scenes_tiny guards by ``rms > 0`` and the recomputation
+from the explicit history, was NOT tried: the machine's load left no time for a second run of it.
 """
 import json
 import io
