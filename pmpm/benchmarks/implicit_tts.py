@@ -28,6 +28,7 @@ the last round's (the runs are deterministic). Without ``--scenes``, ``pmpm benc
 the portal driver of pmpm.benchmarks.implicit (its options: ``--cell --dt --t-end --static ...``).
 """
 import argparse
+import dataclasses
 import json
 import sys
 
@@ -73,8 +74,9 @@ def _scenes(name, o):
     """(implicit scene, explicit scene, joint compared) of scene ``name`` with options ``o``."""
     cell, dt, t_end = o.cell[name], o.dt[name], o.t_end[name]
     if name == "portal":
-        implicit = portal_driver.portal_scene(cell, dt, t_end, root=portal_driver.CHECKOUT, petsc=o.petsc,
-                                              variant=o.variant, implicit=o.implicit)
+        implicit = dataclasses.replace(portal_driver.portal_scene(cell, dt, t_end, root=portal_driver.CHECKOUT,
+                                                                  petsc=o.petsc, variant=o.variant,
+                                                                  implicit=o.implicit), variant=o.variant)
         return implicit, explicit_twin(implicit, cfl=PORTAL_CFL), PORTAL_JOINT
     variant = o.variant if name == "frame3-step" else "northridge_implicit"
     implicit = frame3_scene(cell, variant, ppc=o.ppc, time_step=dt, end_time=t_end, implicit=o.implicit,
@@ -134,6 +136,8 @@ def summary(name, r, o, ranks):
 def report(runs, o, comm=MPI.COMM_WORLD, out=sys.stdout):
     """Print the table (rank 0) and the final JSON line; return the JSON object."""
     rows = [summary(name, runs[name], o, comm.size) for name in o.scenes]
+    # a figure that could not be formed (no drift at all: NaN) is null in the JSON line
+    rows = [{k: (None if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows]
     result = {"benchmark": "implicit_time_to_solution", "ranks": comm.size, "repeat": o.repeat,
               "cpu": "time.process_time of the stepping loop summed over the ranks",
               "wall": "perf_counter on rank 0 around the stepping loop (solver set-up left out)",
@@ -152,7 +156,7 @@ def report(runs, o, comm=MPI.COMM_WORLD, out=sys.stdout):
                   f"{r['halvings']} | {r['explicit_steps']:,} | {r['implicit_wall_s']:.1f} / {r['implicit_cpu_s']:.1f} | "
                   f"{r['explicit_wall_s']:.1f} / {r['explicit_cpu_s']:.1f} | "
                   f"{r['wall_ratio_explicit_over_implicit']:.2f} | {r['cpu_ratio_explicit_over_implicit']:.2f} | "
-                  f"{100 * r['drift_rms_difference_of_peak']:.3f} (peak {1e3 * r['explicit_peak_drift_m']:.3f} mm) |",
+                  f"{100 * (r['drift_rms_difference_of_peak'] or float('nan')):.3f} (peak {1e3 * r['explicit_peak_drift_m']:.3f} mm) |",
                   file=out)
         print(json.dumps(result), file=out, flush=True)
     return result
