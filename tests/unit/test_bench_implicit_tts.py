@@ -68,15 +68,15 @@ def test_three_scenes_tiny(capsys):
         assert set(row) == SCENE_KEYS, row["scene"]
         r = runs[row["scene"]]
         imp, exp = r["implicit"][-1], r["explicit"][-1]
-        # the implicit run took the implicit steps (the end over dt, more if a step halved)
-        # and Newton; the explicit one the CFL steps (many more) and no Newton
-        assert row["implicit_steps"] >= round(row["end_time"] / row["time_step"])
-        if row["halvings"] == 0:
-            assert row["implicit_steps"] == round(row["end_time"] / row["time_step"])
-        assert row["newton_iterations"] >= row["implicit_steps"] and row["factorisations"] >= 1
+        # the implicit run took the implicit steps (the end over dt: a halving splits a step into
+        # sub-steps, pmpm.core.implicit.scheme.advance) and Newton; the explicit one the CFL
+        # steps (many more) and no Newton
+        assert row["implicit_steps"] == round(row["end_time"] / row["time_step"])
+        assert row["newton_iterations"] >= 1 and row["factorisations"] >= 1
         assert exp["stats"].get("newton_iterations") is None
         assert row["explicit_steps"] > 10 * row["implicit_steps"]
-        assert exp["t"][-1] == pytest.approx(row["end_time"]) and imp["t"][-1] == pytest.approx(row["end_time"])
+        assert imp["t"][-1] == pytest.approx(row["end_time"])
+        assert abs(exp["t"][-1] - row["end_time"]) <= 2 * row["end_time"] / row["explicit_steps"]
         # the figure: this test's own RMS of implicit minus the explicit history at the implicit
         # samples, over the explicit run's largest |drift|; the two integrators differ, so > 0
         ref = np.interp(imp["t"], exp["t"], exp["drift"][:, 0])
