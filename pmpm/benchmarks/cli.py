@@ -70,10 +70,12 @@ def add_bench_parser(sub):
                                     "against the 200k block (default cases/frame_3storey.toml)"))
     ranks_arguments(bs.add_parser("ranks", help="the main job on 1 and 2 ranks, idle and under a background load"))
     # the implicit integrator's portal (docs/implicit.md): its own options, parsed by its main
-    p = bs.add_parser("implicit", help="the portal frame with the implicit and the explicit integrator",
+    p = bs.add_parser("implicit", help="the implicit against the explicit integrator: the portal frame, or with "
+                      "--scenes portal frame3-step frame3-record their time to solution",
                       add_help=False)
     p.add_argument("driver_args", nargs=argparse.REMAINDER,
-                   help="its options (pmpm bench implicit --help lists them: --cell, --dt, --static, ...)")
+                   help="its options (pmpm bench implicit --help lists them: --cell, --dt, --static, ...; "
+                        "with --scenes: pmpm bench implicit --scenes portal --help)")
     for name, (_module, _entry, text) in REPOSITORY_DRIVERS.items():
         p = bs.add_parser(name, help=f"{text} (from a checkout: module doc)", add_help=False)
         p.add_argument("driver_args", nargs=argparse.REMAINDER,
@@ -108,7 +110,7 @@ def main(args):
     from pmpm.benchmarks.fixed_cost import fixed_cost
     from pmpm.benchmarks.scaling import scaling
     from pmpm.benchmarks.throughput import effects, throughput
-    from pmpm.benchmarks.implicit import main as implicit_portal
+    from pmpm.benchmarks.implicit_tts import main as implicit_portal
     if args.bench == "implicit":
         return implicit_portal(args.driver_args)
     if args.bench in REPOSITORY_DRIVERS:

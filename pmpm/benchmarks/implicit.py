@@ -11,6 +11,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
+from pmpm.benchmarks.args import FRAME_CASE
 from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker
 from pmpm.scene.config import apply_overrides, parse_scene, read_toml
@@ -18,6 +19,8 @@ from pmpm.scene.frame import expand_frame
 
 __all__ = ["bar_scene", "cantilever_scene", "timoshenko_tip_deflection", "warm_implicit"]
 
+#: the checkout whose cases/ the portal's scene is read from (this package's, not the working folder)
+CHECKOUT = os.path.dirname(os.path.dirname(FRAME_CASE))
 #: the bar (design.md section 7): L = 25, E = 100, rho = 1, first mode omega = pi / 5, T = 10
 BAR_L, BAR_OMEGA = 25.0, math.pi / 5
 #: the bar's explicit step at CFL 0.5 with 0.5 cells: 0.5 * 0.5 / 10
@@ -79,7 +82,7 @@ def warm_implicit():
         s.step()
 
 
-def portal_scene(cell_size=0.05, time_step=1e-3, end_time=0.25, root=".", petsc=None, variant="elastic",
+def portal_scene(cell_size=0.05, time_step=1e-3, end_time=0.25, root=CHECKOUT, petsc=None, variant="elastic",
                  implicit=None):
     """The main job's portal frame (cases/portal_frame.toml, variant elastic or elastoplastic) for the
     implicit integrator: the frame expanded, and what the implicit step does not support yet
@@ -157,7 +160,10 @@ def main(argv=None):
     """``pmpm bench implicit [--cell 0.05] [--dt 1e-3] [--t-end 0.25]`` (or ``python -m
     pmpm.benchmarks.implicit ...``): the elastic portal with both integrators; figures, then one
     JSON line."""
-    ap = argparse.ArgumentParser(prog="pmpm bench implicit", description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="pmpm bench implicit", description=main.__doc__,
+                                 epilog="With --scenes portal frame3-step frame3-record: implicit against explicit "
+                                        "time to solution instead (pmpm.benchmarks.implicit_tts; "
+                                        "pmpm bench implicit --scenes portal --help lists its options).")
     ap.add_argument("--cell", type=float, default=0.05)
     ap.add_argument("--dt", type=float, default=1e-3)
     ap.add_argument("--t-end", type=float, default=0.25)
