@@ -417,6 +417,25 @@ def _power_floor_py(kint):
     return _power_floor(kint)
 
 
+@nb.njit(cache=True, inline="always")
+def _constants(params):
+    """The update's constants from ``params`` = [E, nu, yield_stress, hardening, N]:
+    (E, nu, sigma_y, N, N as an integer or 0, _ipow's floor, the Ziegler modulus c, the
+    sub-step bound h, E / (1 - nu^2), mu, 1 / sigma_y, the quiet bound of Phi^2)."""
+    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
+    kint = 0
+    if N == math.floor(N) and N <= _MAX_INT_POWER:
+        kint = int(N)
+    xfloor = _power_floor(kint)
+    c = alpha * E / (1.0 - alpha)
+    h = sy / E * min(0.1, 1.0 / N)
+    cps = E / (1.0 - nu * nu)
+    mu = E / (2.0 * (1.0 + nu))
+    isy = 1.0 / sy
+    phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2  # H1 < _H1_ROUNDOFF below this Phi^2
+    return E, nu, sy, N, kint, xfloor, c, h, cps, mu, isy, phi_quiet2
+
+
 #: particles per block of the vectorised path (its ~20 buffers stay in the L1 cache)
 _BLOCK = 64
 
@@ -439,17 +458,7 @@ def _update_smooth(stress, de, back, eps_p, eps_eq, work, params, plane_strain, 
     there, the two agree to round-off. Everything else takes the sub-stepped scalar path, or with
     ``continuous`` (the implicit integrator) its blend that is continuous in the increment
     (``_substepped_continuous``)."""
-    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
-    kint = 0
-    if N == math.floor(N) and N <= _MAX_INT_POWER:
-        kint = int(N)
-    xfloor = _power_floor(kint)
-    c = alpha * E / (1.0 - alpha)
-    h = sy / E * min(0.1, 1.0 / N)
-    cps = E / (1.0 - nu * nu)
-    mu = E / (2.0 * (1.0 + nu))
-    isy = 1.0 / sy
-    phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2  # H1 < _H1_ROUNDOFF below this Phi^2
+    E, nu, sy, N, kint, xfloor, c, h, cps, mu, isy, phi_quiet2 = _constants(params)
     n = stress.shape[0]
     if kint == 0:
         for p in range(n):
@@ -571,17 +580,7 @@ def _consistent_tangent(D, stress0, back0, de, params, plane_strain, mat_ids, wh
     Taylor 1985; by differences as Miehe 1996 and Perez-Foguet et al. 2000). Points whose update
     is elastic get the elastic matrix (the update is then exactly D de). Not symmetric in
     general (the loading test and the sub-steps): an LU factorisation takes it."""
-    E, nu, sy, alpha, N = params[0], params[1], params[2], params[3], params[4]
-    kint = 0
-    if N == math.floor(N) and N <= _MAX_INT_POWER:
-        kint = int(N)
-    xfloor = _power_floor(kint)
-    c = alpha * E / (1.0 - alpha)
-    h = sy / E * min(0.1, 1.0 / N)
-    cps = E / (1.0 - nu * nu)
-    mu = E / (2.0 * (1.0 + nu))
-    isy = 1.0 / sy
-    phi_quiet2 = (sy * _H1_ROUNDOFF ** (1.0 / N)) ** 2
+    E, nu, sy, N, kint, xfloor, c, h, cps, mu, isy, phi_quiet2 = _constants(params)
     probe = _TANGENT_PROBE * sy / E
     s1 = np.empty((1, 4))
     b1 = np.empty((1, 4))
