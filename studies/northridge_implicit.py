@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from pmpm.benchmarks.implicit import _implicit_keys
 from studies.frame_3storey import JOINTS, scene_at
 
 __all__ = ["run", "main"]
@@ -223,25 +224,6 @@ def _report(out, res, a):
     for row in out["yield_sequence"]:
         print(f"    {row['member']} yields at t = {row['t']:.2f} s, at ({row['x']:.2f}, {row['y']:.2f}) m")
     print(json.dumps({k: v for k, v in out.items() if k != "explicit"}), flush=True)
-
-
-def _implicit_keys(pairs):
-    """``KEY=VALUE`` strings as scene values (numbers, true/false, else strings)."""
-    out = {}
-    for pair in pairs:
-        key, value = pair.split("=", 1)
-        if value in ("true", "false"):
-            out[key] = value == "true"
-            continue
-        for kind in (int, float):
-            try:
-                out[key] = kind(value)
-                break
-            except ValueError:
-                continue
-        else:
-            out[key] = value
-    return out
 
 
 def _plot(path, res, ex, cell):
