@@ -218,7 +218,10 @@ class LinearSolver:
         if self.A is not None:
             self.A.destroy()
         self.A = A
-        if self.ksp is not None and self._sizes != A.getSizes():
+        resized = self.ksp is not None and self._sizes != A.getSizes()
+        # decided together: a rank whose own rows kept their number while a neighbour's changed
+        # must destroy the solver too (KSPDestroy is collective; deciding alone deadlocked 3 ranks)
+        if self.comm.allreduce(1 if resized else 0) > 0:
             # the active nodes changed: a new solver (a reset KSP keeps sub-solvers, e.g. the
             # multigrid levels, of the old size)
             self.ksp.destroy()
