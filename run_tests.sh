@@ -13,12 +13,18 @@ serial=(tests/unit tests/verification tests/integration)
 [ -d tests/slurm ] && serial+=(tests/slurm)
 # the real-client tier: Debian's ParaView (installed by the test when missing, about 540 MB)
 [ -d tests/paraview ] && serial+=(tests/paraview)
-python -m pytest -q -p no:cacheprovider "${serial[@]}" "$@"
+# the slowest tests are listed at the end, so that the suite's time can be watched (README: about 20 min)
+python -m pytest -q -p no:cacheprovider --durations=15 "${serial[@]}" "$@"
+echo "== serial tiers done after ${SECONDS} s =="
+# under mpirun a test that hangs (ranks in different collectives) prints every rank's stacks
+# after PMPM_MPI_TEST_TIMEOUT s and stops the tier (tests/conftest.py)
 for n in 2 3 4; do
     echo "== MPI tests on $n ranks =="
-    mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q --color=no -p no:cacheprovider tests/mpi
+    mpirun -n "$n" --oversubscribe --bind-to none python -m pytest -q --color=no -p no:cacheprovider --durations=5 tests/mpi
+    echo "== done after ${SECONDS} s =="
 done
 if [ -d tests/hard/mpi ]; then
     echo "== hard cases on 3 ranks =="
     mpirun -n 3 --oversubscribe --bind-to none python -m pytest -q --color=no -p no:cacheprovider tests/hard/mpi
+    echo "== done after ${SECONDS} s =="
 fi

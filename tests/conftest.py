@@ -12,7 +12,10 @@ collective until killed). A rank that failed waits at most ``PMPM_MPI_AGREE_TIME
 of the test that the failed rank left), it prints its failure and aborts every rank, so a failure
 never becomes a hang. docs/testing.md; tests/unit/test_mpi_failures_do_not_hang.py.
 """
+import faulthandler
+import math
 import os
+import signal
 import sys
 import time
 
@@ -46,6 +49,7 @@ def pytest_configure(config):
     if _mpi_size() > 1:
         from mpi4py import MPI
         _AGREE = MPI.COMM_WORLD.Dup()
+        _open_hang_report(config)
     if _mpi_rank() != 0:
         reporter = config.pluginmanager.get_plugin("terminalreporter")
         if reporter is not None:
@@ -115,6 +119,49 @@ def _agree(comm, item, report):
         # runs the same phases and so the same collectives
         report.outcome = "skipped"
         report.longrepr = (str(item.path), item.location[1] or 0, f"skipped on rank(s) {ranks}: {first}")
+
+
+#: seconds one test may take under mpirun before every rank prints its Python stacks
+#: (``PMPM_MPI_TEST_TIMEOUT``; 0 turns it off); ``MPI_KILL_AFTER_S`` later the ranks end (SIGALRM's
+#: default action, which needs no interpreter: a rank blocked in a PETSc collective holds the
+#: GIL) and mpirun stops the tier. A deadlock (ranks in different collectives) never fails by
+#: itself: in CI it ran the 3-rank tier into the 90-minute limit with no word of which test
+#: hung. The slowest MPI test takes about 1 minute on 4 ranks oversubscribed on this 2-core
+#: machine; 900 s leaves a loaded CI host 15 times that.
+MPI_TEST_TIMEOUT_S = float(os.environ.get("PMPM_MPI_TEST_TIMEOUT", "900"))
+MPI_KILL_AFTER_S = 10
+
+
+#: where a hung test's stacks go: the process's real stderr (pytest captures fd 2 while a test
+#: runs, and a stack written there would be lost with the process)
+_HANG_REPORT = None
+
+
+def _open_hang_report(config):
+    global _HANG_REPORT
+    capman = config.pluginmanager.getplugin("capturemanager")
+    if capman is not None:
+        capman.suspend_global_capture(in_=False)
+    try:
+        _HANG_REPORT = os.fdopen(os.dup(2), "w")
+    finally:
+        if capman is not None:
+            capman.resume_global_capture()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    armed = _HANG_REPORT is not None and MPI_TEST_TIMEOUT_S > 0 and \
+        signal.getsignal(signal.SIGALRM) == signal.SIG_DFL
+    if armed:
+        faulthandler.dump_traceback_later(MPI_TEST_TIMEOUT_S, exit=False, file=_HANG_REPORT)
+        signal.alarm(int(math.ceil(MPI_TEST_TIMEOUT_S)) + MPI_KILL_AFTER_S)
+    try:
+        yield
+    finally:
+        if armed:
+            signal.alarm(0)
+            faulthandler.cancel_dump_traceback_later()
 
 
 #: test folders that are tiers CI must run (each test in them is marked ``required_tier``)

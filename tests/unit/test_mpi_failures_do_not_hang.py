@@ -10,7 +10,10 @@ sees both ranks, not only rank 0's terminal:
   next test, whose collective would have hung the rank that went on, is never started;
 * without ``-x``, both ranks go on after that failure; a test that fails on rank 0 before a
   collective that rank 1 then blocks in ends in an abort of every rank within
-  ``PMPM_MPI_AGREE_TIMEOUT`` (set to 3 s here) instead of a hang, rank 0's failure printed.
+  ``PMPM_MPI_AGREE_TIMEOUT`` (set to 3 s here) instead of a hang, rank 0's failure printed;
+* a deadlock that no failure announces (the ranks in different collectives, as a rank-local
+  decision to destroy a PETSc solver once did) ends within ``PMPM_MPI_TEST_TIMEOUT`` (set to
+  5 s here) with the hung test's Python stack printed.
 """
 import os
 import pathlib
@@ -45,6 +48,19 @@ def test_d_after_the_abort():
     pass
 '''
 
+DEADLOCK = '''
+from mpi4py import MPI
+
+comm = MPI.COMM_WORLD
+
+
+def test_ranks_in_different_collectives():
+    if comm.rank == 0:
+        comm.allreduce(1)
+    else:
+        comm.bcast(1, root=1)
+'''
+
 #: each rank writes "nodeid when outcome" lines to outcomes_<rank>.txt
 LOG_HOOK = '''
 
@@ -57,16 +73,17 @@ def pytest_runtest_logreport(report):
 TIMEOUT_S = 60
 
 
-def _env(agree_timeout):
+def _env(agree_timeout, test_timeout=0):
     # a clean environment: no MPI variables of a parent that may itself be an MPI process
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_COMM", "PMIX", "PMI_", "OMPI_MCA_orte"))}
     env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               PMPM_MPI_AGREE_TIMEOUT=str(agree_timeout), PYTHONDONTWRITEBYTECODE="1")
+               PMPM_MPI_AGREE_TIMEOUT=str(agree_timeout), PMPM_MPI_TEST_TIMEOUT=str(test_timeout),
+               PYTHONDONTWRITEBYTECODE="1")
     env.pop("PMPM_REQUIRE_TIERS", None)
     return env
 
 
-def _run(tmp_path, *pytest_args):
+def _run(tmp_path, *pytest_args, planted=PLANTED, test_timeout=0):
     tree = tmp_path / "tree"
     tree.mkdir(exist_ok=True)
     for f in tree.glob("outcomes_*.txt"):
@@ -74,11 +91,11 @@ def _run(tmp_path, *pytest_args):
     shutil.copy(CONFTEST, tree / "conftest.py")
     with open(tree / "conftest.py", "a") as f:
         f.write(LOG_HOOK)
-    (tree / "test_planted.py").write_text(PLANTED)
+    (tree / "test_planted.py").write_text(planted)
     cmd = ["mpirun", "-n", "2", "--oversubscribe", "--bind-to", "none", sys.executable, "-m", "pytest",
            "-q", "-p", "no:cacheprovider", "-o", "addopts=", "--rootdir", str(tree), *pytest_args, "test_planted.py"]
     t0 = time.monotonic()
-    proc = subprocess.run(cmd, cwd=tree, env=_env(3), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+    proc = subprocess.run(cmd, cwd=tree, env=_env(3, test_timeout), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                           text=True, timeout=TIMEOUT_S)
     seconds = time.monotonic() - t0
     outcomes = {}
@@ -114,4 +131,13 @@ def test_a_failure_before_a_collective_aborts_instead_of_hanging(tmp_path):
     assert proc.returncode != 0
     assert "planted failure on rank 0" in proc.stdout and "Aborting every rank" in proc.stdout, proc.stdout
     # PMPM_MPI_AGREE_TIMEOUT is 3 s: the abort comes 3 s after the failure, not after a CI timeout
+    assert seconds < 40, seconds
+
+
+def test_a_deadlock_is_stopped_with_the_stack_of_the_hung_test(tmp_path):
+    # rank 0 in an allreduce, rank 1 in a bcast: neither fails, both wait for ever
+    proc, seconds, outcomes = _run(tmp_path, planted=DEADLOCK, test_timeout=5)
+    assert proc.returncode != 0
+    assert "Timeout" in proc.stdout and "test_ranks_in_different_collectives" in proc.stdout, proc.stdout
+    # 5 + 10 s after the test started, not the subprocess timeout (60 s) nor CI's 90 minutes
     assert seconds < 40, seconds
