@@ -22,7 +22,9 @@ class SchemeContext:
     ``reset_grid()``, ``particles_to_grid(momentum, forces)``, ``exchange_halo(fields)``,
     ``update_grid(dt)``, ``grid_velocity(source, target)``, ``grid_to_particles(remap,
     strain=False)`` (``strain``: the transfer also gathers the strain increment, volume and F in
-    its pass, as MLS-MPM's), ``update_strain(dt, velocity_field, move)``,
+    its pass, as MLS-MPM's; ``tail``: also the move, the strays count and the first half of the
+    internal work, only where ``tail_fusable``, then no ``move_particles``),
+    ``update_strain(dt, velocity_field, move)``,
     ``move_particles(dt)``, ``update_stress()``.
 
     Attributes
@@ -58,8 +60,12 @@ class SchemeContext:
     def grid_velocity(self, source, target):
         self._solver.grid_velocity(source, target)
 
-    def grid_to_particles(self, remap, strain=False):
-        self._solver.grid_to_particles(remap, strain)
+    def grid_to_particles(self, remap, strain=False, tail=False):
+        self._solver.grid_to_particles(remap, strain, tail)
+
+    @property
+    def tail_fusable(self):
+        return self._solver.tail_fusable
 
     def update_strain(self, dt, velocity_field, move=True):
         self._solver.update_strain(dt, velocity_field, move)
