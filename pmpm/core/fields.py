@@ -33,9 +33,10 @@ class GridFields:
         this step's node passes visit: those the particles' stencils reach (plus the halo)."""
         s.window.reset(s.particles["x"])
 
-    def particles_to_grid(self, s, momentum, forces):
-        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        s.transfer.p2g(s._step_context(forces=forces), momentum)
+    def particles_to_grid(self, s, momentum, forces, impulse=False):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces (``impulse``:
+        the force's impulse with the momentum where the transfer can, ``s.impulse_fusable``)."""
+        s.transfer.p2g(s._step_context(forces=forces, impulse=impulse), momentum)
         if forces:
             for scatter in s._hooks["scatter_forces"]:   # point loads
                 scatter(s)

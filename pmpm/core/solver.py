@@ -245,14 +245,16 @@ class Solver:
         """The owned node range of the window: (slab axis, first, end) in window indices."""
         return self._owned_local
 
-    def _step_context(self, forces=False, kinematics=None, tail=None):
+    def _step_context(self, forces=False, kinematics=None, tail=None, impulse=False):
         """What the transfer sees of this step (pmpm.core.transfers.StepContext): the force
         pass's stress and body acceleration when ``forces``; the strain outputs
         (``kinematics``) when the transfer gathers the strain in its velocity pass; ``tail``
-        (``tail_arguments()``) when it folds the step's later particle passes in too."""
+        (``tail_arguments()``) when it folds the step's later particle passes in too;
+        ``impulse`` when the force pass scatters the force's impulse with the momentum."""
         return StepContext(self.particles, self.window, self._geometry(), self.decomp.sum_halo,
                            self.force_stress() if forces else None, self.gravity if forces else None,
-                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0), kinematics, tail)
+                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0), kinematics, tail,
+                           impulse)
 
     def _scratch(self, name, shape):
         arr = getattr(self, name, None)
@@ -280,9 +282,23 @@ class Solver:
         """Step 1: zero the rank's grid window and choose the tiles this step's node passes visit."""
         self.grid_fields.reset_grid(self)
 
-    def particles_to_grid(self, momentum, forces):
-        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        self.grid_fields.particles_to_grid(self, momentum, forces)
+    def particles_to_grid(self, momentum, forces, impulse=False):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces (with
+        ``impulse``, only where ``impulse_fusable``: the force's impulse dt f scattered with the
+        momentum where the transfer can; the grid update's (m v + dt f) / m is the same sum)."""
+        if impulse:
+            self.grid_fields.particles_to_grid(self, momentum, forces, impulse=True)
+        else:
+            self.grid_fields.particles_to_grid(self, momentum, forces)
+
+    @property
+    def impulse_fusable(self):
+        """Whether the force pass may scatter the force's impulse with the momentum: the grid
+        update needs the momentum apart from the force for nothing else (no nodal damping, no
+        hook after the grid update reading its velocity change: supports, damping works), and
+        the grid fields are the default one."""
+        return (self.damping is None and not self._hooks["after_grid_update"]
+                and self.grid_fields.scene_key is None)
 
     def force_stress(self):
         """The stress whose divergence is the internal force: the particles' stress as the
