@@ -413,6 +413,10 @@ class Solver:
         # the tensor state fields (back stress) are shared by the materials: rotated once
         for name in dict.fromkeys(n for m in self.materials for n in m.tensor_state_fields):
             self._rotate(p[name])
+        # the second half in the updates' own passes where every material sums it there (each
+        # pass sums the particles it updates: together all of them)
+        summed = not thickness and all(material.sums_power for material, _ in self._stress_passes)
+        after = 0.0
         for material, which in self._stress_passes:
             if thickness and not material.needs_deformation_gradient:
                 trace_before = self._scratch("_trace_buf", (p.n,))
@@ -420,12 +424,17 @@ class Solver:
             state = {name: p.fields.get(name) for name in material.state_fields}
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
-            material.update_stress(p["stress"], self._de, state, p["mat"], which)
+            if summed:
+                after += material.update_stress_power(p["stress"], self._de, p["vol"], state, p["mat"], which)
+            else:
+                material.update_stress(p["stress"], self._de, state, p["mat"], which)
             if thickness and not material.needs_deformation_gradient:
                 # F33 from szz = 0 (the hyperelastic models solve it themselves)
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
                                             material.E, material.nu, p["mat"], which)
-        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+        if not summed:
+            after = K.stress_power(p["stress"], self._de, p["vol"])
+        self.internal_work += 0.5 * after
         for after in self._hooks["after_stress_update"]:   # viscous stress, fading bodies
             after(self)
 
