@@ -569,6 +569,7 @@ class Solver:
         if 0 < remaining < dt:  # land on the end time exactly
             dt = remaining
         self._dt_step = dt
+        self._power_before = self._strays = None   # (nothing of a step cut short carries over)
         self.scheme.advance(SchemeContext(self, dt))
         energy_due = (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0
         bad, outside, leaving, sums = self._check_and_next_dt(energy_due)
