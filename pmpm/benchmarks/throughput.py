@@ -92,16 +92,17 @@ def step_bytes_per_particle(solver):
         (("stress", "vol") + reads_F, ("stress",) + reads_F),                 # update_stress
     ]
     grid_passes = 6   # reset, scatter x2, update, velocity, gather
+    scratch = 16 + 16 + 24 + 24 + 24  # dx written and read, de written and read twice
     if solver.scheme.name == "mls":   # one P2G, one G2P that also takes the strain (pmpm.core.mls)
         size.setdefault("C", 0)
         passes = [
             (("x", "m", "v", "C", "vol", "stress"), ()),                      # particles_to_grid
-            (("x", "v", "C", "vol", "strain", "F", "vol0"), ("v", "C", "vol", "strain", "F")),  # g2p
-            (("x",), ("x",)),                                                 # move_particles
+            # g2p with the move (and the strays count and first work half: ``tail_fusable``)
+            (("x", "v", "C", "vol", "strain", "F", "vol0", "stress"), ("x", "v", "C", "vol", "strain", "F")),
             (("stress", "vol") + reads_F, ("stress",) + reads_F),             # update_stress
         ]
         grid_passes = 4   # reset, scatter, update, gather
-    scratch = 16 + 16 + 24 + 24 + 24  # dx written and read, de written and read twice
+        scratch = 16 + 24 + 24        # dx written, de written and read once
     particle = sum(size[f] for r, w in passes for f in r + w) + scratch
     grid_nodes = solver.window.G.shape[0] * solver.window.G.shape[1]
     grid = grid_nodes * solver.window.G.shape[2] * 8 * grid_passes / p.n

@@ -33,9 +33,10 @@ class GridFields:
         this step's node passes visit: those the particles' stencils reach (plus the halo)."""
         s.window.reset(s.particles["x"])
 
-    def particles_to_grid(self, s, momentum, forces):
-        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        s.transfer.p2g(s._step_context(forces=forces), momentum)
+    def particles_to_grid(self, s, momentum, forces, impulse=False):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces (``impulse``:
+        the force's impulse with the momentum where the transfer can, ``s.impulse_fusable``)."""
+        s.transfer.p2g(s._step_context(forces=forces, impulse=impulse), momentum)
         if forces:
             for scatter in s._hooks["scatter_forces"]:   # point loads
                 scatter(s)
@@ -66,16 +67,23 @@ class GridFields:
         for after in s._hooks["after_grid_velocity"]:
             after(s, target)
 
-    def grid_to_particles(self, s, remap, strain=False):
+    def grid_to_particles(self, s, remap, strain=False, tail=False):
         """Step 9 / eq. 5: particle velocities by the scene's transfer (FLIP/PIC, APIC); MUSL
         also re-maps their momenta. ``strain``: the transfer gathers the strain increment,
-        volume and F in the same pass (MLS-MPM: (strain, de, dw, F, vol0, dq) in its context)."""
+        volume and F in the same pass (MLS-MPM: (strain, de, dw, F, vol0, dq) in its context).
+        ``tail`` (with ``strain``; only where ``s.tail_fusable``): the move, the strays count and
+        the first half of the internal work too (``s.tail_arguments()`` in the context; the
+        transfer returns their results after the speed, handed to ``s.take_tail``)."""
         s.new_moves()
         kinematics = None
         if strain:
             kinematics = (s.particles.fields.get("strain"),) + s._kinematics_outputs()
-        vmax, bad = s.transfer.g2p(s._step_context(kinematics=kinematics), remap)
+        ctx = s._step_context(kinematics=kinematics, tail=s.tail_arguments() if tail else None)
+        out = s.transfer.g2p(ctx, remap)
+        vmax, bad = out[:2]
         s.report_speed(vmax, bad)
+        if tail:
+            s.take_tail(*out[2:])
         for after in s._hooks["after_g2p"]:   # held particles
             after(s)
 

@@ -7,6 +7,13 @@ the strain increment, volume and F from it), the move and the stress update:
     reset_grid -> particles_to_grid (mass, momentum, forces) -> exchange_halo (all)
     -> update_grid -> grid_to_particles (v, C, d_eps, V, F, dx) -> move -> update_stress
 
+where the P2G scatters the force's impulse dt f with the momentum (three fields a node, not
+five) unless the grid update needs the force apart (nodal damping, a hook after the grid update:
+``impulse_fusable``), and the move, the step-end count of particles that left the grid or the slab and the first
+half of the internal work run inside the G2P's pass unless something acts between them (held
+particles: ``tail_fusable``); a stream over the particle arrays each, a fifth of the quadratic
+step before (docs/performance.md).
+
 USL's order with APIC's transfer, and 2 K^2 node visits per particle-step where MUSL makes
 4 K^2. The scheme brings its transfer (``MLSTransfer``: the affine matrix C per particle);
 ``solver.transfer`` stays the default. Point particles only (the MLS gradient is built from
@@ -32,14 +39,19 @@ class MLSTransfer(Transfer):
 
     def p2g(self, ctx, momentum):
         p = ctx.particles
-        p2g_mls(p["x"], p["m"], p["v"], p["C"], p["vol"], ctx.stress,
-                ctx.gravity, None, None, None, *ctx.geometry)
+        args = (p["x"], p["m"], p["v"], p["C"], p["vol"], ctx.stress, ctx.gravity, None, None, None, *ctx.geometry)
+        if ctx.impulse:   # m v + dt f scattered together (Hu et al.'s P2G)
+            p2g_mls(*args, ctx.dt)
+        else:
+            p2g_mls(*args)
 
     def g2p(self, ctx, remap):
         p = ctx.particles
         strain, de, dw, F, vol0, dq = ctx.kinematics
-        return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, ctx.dx, ctx.dt,
-                       strain, de, dw, F, p["vol"], vol0, dq)
+        args = (p["x"], p["v"], p["C"], *ctx.geometry, ctx.dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq)
+        if ctx.tail is not None:   # (vmax, bad, work, power, outside, leaving, inverted)
+            return g2p_mls(*args, *ctx.tail)
+        return g2p_mls(*args)[:2]
 
 
 class MLS(Scheme):
@@ -67,9 +79,15 @@ class MLS(Scheme):
     def advance(self, ctx):
         dt = ctx.dt
         ctx.reset_grid()
-        ctx.particles_to_grid(momentum=True, forces=True)
+        if ctx.impulse_fusable:   # the force's impulse scattered with the momentum
+            ctx.particles_to_grid(momentum=True, forces=True, impulse=True)
+        else:
+            ctx.particles_to_grid(momentum=True, forces=True)
         ctx.exchange_halo(ALL)
         ctx.update_grid(dt)
-        ctx.grid_to_particles(remap=False, strain=True)
-        ctx.move_particles(dt)
+        if ctx.tail_fusable:   # the move, strays count and first work half in the G2P's pass
+            ctx.grid_to_particles(remap=False, strain=True, tail=True)
+        else:
+            ctx.grid_to_particles(remap=False, strain=True)
+            ctx.move_particles(dt)
         ctx.update_stress()

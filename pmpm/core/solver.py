@@ -139,6 +139,11 @@ class Solver:
         # CPDI: the kernels count corners whose support leaves the window here ([count, first
         # particle]); read and reset after every step (``_check_and_next_dt``)
         self._corner_escape = np.array([0, -1], dtype=np.int64)
+        # a G2P with the step's later particle passes folded in (``grid_to_particles(tail=
+        # True)``) leaves here the first half of the internal work and the strays it counted,
+        # which update_stress and the step-end check then take instead of their own passes
+        self._power_before = None
+        self._strays = None
         self._build_window()
         self.wave_speed = max(m.wave_speed() for m in self.materials)
         self.mass_cutoff = mass_cutoff * self.decomp.allreduce_max(
@@ -240,13 +245,16 @@ class Solver:
         """The owned node range of the window: (slab axis, first, end) in window indices."""
         return self._owned_local
 
-    def _step_context(self, forces=False, kinematics=None):
+    def _step_context(self, forces=False, kinematics=None, tail=None, impulse=False):
         """What the transfer sees of this step (pmpm.core.transfers.StepContext): the force
         pass's stress and body acceleration when ``forces``; the strain outputs
-        (``kinematics``) when the transfer gathers the strain in its velocity pass."""
+        (``kinematics``) when the transfer gathers the strain in its velocity pass; ``tail``
+        (``tail_arguments()``) when it folds the step's later particle passes in too;
+        ``impulse`` when the force pass scatters the force's impulse with the momentum."""
         return StepContext(self.particles, self.window, self._geometry(), self.decomp.sum_halo,
                            self.force_stress() if forces else None, self.gravity if forces else None,
-                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0), kinematics)
+                           getattr(self, "_dx", None), getattr(self, "_dt_step", 0.0), kinematics, tail,
+                           impulse)
 
     def _scratch(self, name, shape):
         arr = getattr(self, name, None)
@@ -274,9 +282,23 @@ class Solver:
         """Step 1: zero the rank's grid window and choose the tiles this step's node passes visit."""
         self.grid_fields.reset_grid(self)
 
-    def particles_to_grid(self, momentum, forces):
-        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces."""
-        self.grid_fields.particles_to_grid(self, momentum, forces)
+    def particles_to_grid(self, momentum, forces, impulse=False):
+        """Steps 4-6 / eq. 2: mass and momentum and/or internal and external forces (with
+        ``impulse``, only where ``impulse_fusable``: the force's impulse dt f scattered with the
+        momentum where the transfer can; the grid update's (m v + dt f) / m is the same sum)."""
+        if impulse:
+            self.grid_fields.particles_to_grid(self, momentum, forces, impulse=True)
+        else:
+            self.grid_fields.particles_to_grid(self, momentum, forces)
+
+    @property
+    def impulse_fusable(self):
+        """Whether the force pass may scatter the force's impulse with the momentum: the grid
+        update needs the momentum apart from the force for nothing else (no nodal damping, no
+        hook after the grid update reading its velocity change: supports, damping works), and
+        the grid fields are the default one."""
+        return (self.damping is None and not self._hooks["after_grid_update"]
+                and self.grid_fields.scene_key is None)
 
     def force_stress(self):
         """The stress whose divergence is the internal force: the particles' stress as the
@@ -305,14 +327,42 @@ class Solver:
         """v = (mv)/m with BCs, e.g. of the MUSL re-mapped momentum (eq. 6)."""
         self.grid_fields.grid_velocity(self, source, target)
 
-    def grid_to_particles(self, remap, strain=False):
+    def grid_to_particles(self, remap, strain=False, tail=False):
         """Step 9 / eq. 5: particle velocities (and MUSL's re-map of their momenta; with
         ``strain``, the strain increment, volume and F of a transfer that gathers them in the
-        same pass)."""
-        if strain:
+        same pass; with ``tail`` (only where ``tail_fusable``), also the move, the step-end
+        count of strays and the first half of the internal work: no move_particles then)."""
+        if tail:
+            self.grid_fields.grid_to_particles(self, remap, strain=True, tail=True)
+        elif strain:
             self.grid_fields.grid_to_particles(self, remap, strain=True)
         else:
             self.grid_fields.grid_to_particles(self, remap)
+
+    @property
+    def tail_fusable(self):
+        """Whether the step's particle passes after the G2P (the move, the first half of the
+        internal work, the strays count) may run inside it: nothing of the run acts on the
+        particles' velocities between the G2P and the move (no ``after_g2p`` hook: held
+        particles), and the grid fields are the default one (contact's have their own G2P)."""
+        return not self._hooks["after_g2p"] and self.grid_fields.scene_key is None
+
+    def tail_arguments(self):
+        """What a G2P with the step's later passes folded in needs: (m, body acceleration,
+        the stress for the first half of the internal work (None when the stress is rotated
+        first: the solver's pass takes it then), the owned cell columns (axis, c0, c1))."""
+        c0, c1 = self.decomp.owned
+        return (self.particles["m"], self.gravity, None if self.rotates_stress else self.particles["stress"],
+                (self.axis, c0, min(c1, self.grid.cells[self.axis])))
+
+    def take_tail(self, work, power, outside, leaving, inverted):
+        """The results of a G2P with the later passes folded in: the body force's work over the
+        moves, the first half of the internal work (kept for update_stress when it was taken)
+        and the strays (kept for the step-end check)."""
+        self.external_work += work
+        self._power_before = None if self.rotates_stress else power
+        self._strays = (outside, leaving, inverted)
+        self._work_of_moves()
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
@@ -355,11 +405,18 @@ class Solver:
         self._rotate(p["stress"])
         # internal work by the trapezoid rule, half before and half after the update; it closes
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
-        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+        before, self._power_before = self._power_before, None   # taken in the G2P's pass?
+        if before is None:
+            before = K.stress_power(p["stress"], self._de, p["vol"])
+        self.internal_work += 0.5 * before
         thickness = self.keeps_F and self.options.plane_stress
         # the tensor state fields (back stress) are shared by the materials: rotated once
         for name in dict.fromkeys(n for m in self.materials for n in m.tensor_state_fields):
             self._rotate(p[name])
+        # the second half in the updates' own passes where every material sums it there (each
+        # pass sums the particles it updates: together all of them)
+        summed = not thickness and all(material.sums_power for material, _ in self._stress_passes)
+        after = 0.0
         for material, which in self._stress_passes:
             if thickness and not material.needs_deformation_gradient:
                 trace_before = self._scratch("_trace_buf", (p.n,))
@@ -367,12 +424,17 @@ class Solver:
             state = {name: p.fields.get(name) for name in material.state_fields}
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
-            material.update_stress(p["stress"], self._de, state, p["mat"], which)
+            if summed:
+                after += material.update_stress_power(p["stress"], self._de, p["vol"], state, p["mat"], which)
+            else:
+                material.update_stress(p["stress"], self._de, state, p["mat"], which)
             if thickness and not material.needs_deformation_gradient:
                 # F33 from szz = 0 (the hyperelastic models solve it themselves)
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
                                             material.E, material.nu, p["mat"], which)
-        self.internal_work += 0.5 * K.stress_power(p["stress"], self._de, p["vol"])
+        if not summed:
+            after = K.stress_power(p["stress"], self._de, p["vol"])
+        self.internal_work += 0.5 * after
         for after in self._hooks["after_stress_update"]:   # viscous stress, fading bodies
             after(self)
 
@@ -390,9 +452,12 @@ class Solver:
         Returns (bad, outside, leaving, summed energies or None)."""
         g, d = self.grid, self.decomp
         c0, c1 = d.owned
-        outside, leaving, inverted = K.count_strays(
-            self.particles["x"], self.particles["vol"], g.origin, g.inv_h, g.cells[0], g.cells[1],
-            self.axis, c0, min(c1, g.cells[self.axis]))
+        if self._strays is not None:   # counted in the G2P's pass, after the move
+            (outside, leaving, inverted), self._strays = self._strays, None
+        else:
+            outside, leaving, inverted = K.count_strays(
+                self.particles["x"], self.particles["vol"], g.origin, g.inv_h, g.cells[0], g.cells[1],
+                self.axis, c0, min(c1, g.cells[self.axis]))
         vmax = self._vmax_local if math.isfinite(self._vmax_local) else math.inf
         bad = self._bad_local + inverted + (0 if math.isfinite(vmax) else 1)
         bad_F, self._first_bad_F = K.check_deformation(self.particles["F"]) if self.keeps_F else (0, -1)
@@ -504,6 +569,7 @@ class Solver:
         if 0 < remaining < dt:  # land on the end time exactly
             dt = remaining
         self._dt_step = dt
+        self._power_before = self._strays = None   # (nothing of a step cut short carries over)
         self.scheme.advance(SchemeContext(self, dt))
         energy_due = (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0
         bad, outside, leaving, sums = self._check_and_next_dt(energy_due)

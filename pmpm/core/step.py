@@ -19,10 +19,13 @@ class SchemeContext:
     """One step as a scheme sees it (built by ``Solver.step`` for each step).
 
     Phases (each a method of the solver's, pmpm.core.solver; the effects' hooks run inside):
-    ``reset_grid()``, ``particles_to_grid(momentum, forces)``, ``exchange_halo(fields)``,
+    ``reset_grid()``, ``particles_to_grid(momentum, forces, impulse=False)`` (``impulse``: the
+    force's impulse with the momentum, only where ``impulse_fusable``), ``exchange_halo(fields)``,
     ``update_grid(dt)``, ``grid_velocity(source, target)``, ``grid_to_particles(remap,
     strain=False)`` (``strain``: the transfer also gathers the strain increment, volume and F in
-    its pass, as MLS-MPM's), ``update_strain(dt, velocity_field, move)``,
+    its pass, as MLS-MPM's; ``tail``: also the move, the strays count and the first half of the
+    internal work, only where ``tail_fusable``, then no ``move_particles``),
+    ``update_strain(dt, velocity_field, move)``,
     ``move_particles(dt)``, ``update_stress()``.
 
     Attributes
@@ -46,8 +49,12 @@ class SchemeContext:
     def reset_grid(self):
         self._solver.reset_grid()
 
-    def particles_to_grid(self, momentum, forces):
-        self._solver.particles_to_grid(momentum, forces)
+    def particles_to_grid(self, momentum, forces, impulse=False):
+        self._solver.particles_to_grid(momentum, forces, impulse)
+
+    @property
+    def impulse_fusable(self):
+        return self._solver.impulse_fusable
 
     def exchange_halo(self, fields):
         self._solver.exchange_halo(fields)
@@ -58,8 +65,12 @@ class SchemeContext:
     def grid_velocity(self, source, target):
         self._solver.grid_velocity(source, target)
 
-    def grid_to_particles(self, remap, strain=False):
-        self._solver.grid_to_particles(remap, strain)
+    def grid_to_particles(self, remap, strain=False, tail=False):
+        self._solver.grid_to_particles(remap, strain, tail)
+
+    @property
+    def tail_fusable(self):
+        return self._solver.tail_fusable
 
     def update_strain(self, dt, velocity_field, move=True):
         self._solver.update_strain(dt, velocity_field, move)

@@ -45,15 +45,26 @@ class StepContext:
         (strain, de, dw, F, vol0, dq): the strain outputs of pmpm.core.kernels.transfer's
         ``strain_increment`` when the scheme asks grid-to-particles to gather the strain in the
         same pass (MLS-MPM); None otherwise.
+    tail : tuple or None
+        (m, gravity, stress or None, (axis, c0, c1)) when the scheme asks grid-to-particles to
+        fold the step's later particle passes in (the move, the strays count, the first half of
+        the internal work: pmpm.core.kernels.mls.g2p_mls); its g2p then returns their results
+        after (vmax, bad). None otherwise.
+
+    impulse : bool
+        The force pass scatters the force's impulse dt f with the momentum (fields 1, 2) rather
+        than the force apart (fields 3, 4), where the transfer can (MLS-MPM's P2G); only when
+        the scheme asks (pmpm.core.mls).
     """
 
-    __slots__ = ("particles", "window", "geometry", "sum_halo", "stress", "gravity", "dx", "dt", "kinematics")
+    __slots__ = ("particles", "window", "geometry", "sum_halo", "stress", "gravity", "dx", "dt", "kinematics",
+                 "tail", "impulse")
 
     def __init__(self, particles, window, geometry, sum_halo, stress=None, gravity=None, dx=None, dt=0.0,
-                 kinematics=None):
+                 kinematics=None, tail=None, impulse=False):
         self.particles, self.window, self.geometry, self.sum_halo = particles, window, geometry, sum_halo
         self.stress, self.gravity, self.dx, self.dt = stress, gravity, dx, dt
-        self.kinematics = kinematics
+        self.kinematics, self.tail, self.impulse = kinematics, tail, impulse
 
 
 class Transfer:

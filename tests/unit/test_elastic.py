@@ -43,6 +43,29 @@ def test_only_the_selected_material_is_updated():
 
 
 @pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
+def test_update_with_power_is_the_update_and_the_power_of_its_particles(formulation):
+    """``update_stress_power`` (the update with the second half of the step's internal work in
+    its pass): the stress of ``update_stress`` (D de, docs/verification.md section 1) and
+    sum_p V_p sigma_new : de_p over the particles of material ``which`` only, off the origin
+    (nonzero starting stresses). Tolerance: round-off of 50 terms. Shown to fail: with the
+    power summed with the stress before the increment, or over every particle."""
+    m = _mat(formulation)
+    rng = np.random.default_rng(3)
+    de = rng.normal(scale=1e-4, size=(50, 3))
+    vol = rng.uniform(0.5, 2.0, 50)
+    ids = (rng.uniform(size=50) < 0.5).astype(np.int32)
+    start = rng.normal(scale=1e6, size=(50, 4))
+    expected = start.copy()
+    m.update_stress(expected, de, {}, ids, 1)
+    stress = start.copy()
+    power = m.update_stress_power(stress, de, vol, {}, ids, 1)
+    np.testing.assert_array_equal(stress, expected)
+    mine = ids == 1
+    ref = np.sum(vol[mine] * np.sum(expected[mine, :3] * de[mine], axis=1))
+    assert m.sums_power and power == pytest.approx(ref, rel=1e-12)
+
+
+@pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
 def test_elastic_energy_density_is_half_sigma_epsilon(formulation):
     m = _mat(formulation)
     de = np.array([[2e-4, -1e-4, 5e-5]])

@@ -23,7 +23,9 @@ speed (docs/performance.md, "The MLS step made faster"): D_p^-1 is the B-spline'
 wherever the support is not boundary-modified (``_inverse_moments``), the gather sums by rows,
 the scatter indexes a flat view of the grid, and both kernels let the compiler fuse multiplies
 and adds (FMA; no fast-math assumption about NaN or infinity, so the non-finite checks hold).
-The position update x += dx and the stress update are the step's later passes (no grid visit).
+The position update x += dx, the step-end count of strays and the first half of the internal
+work are folded into the G2P when the scheme asks (``g2p_mls``'s last arguments); the stress
+update stays the materials' pass.
 """
 import math
 
@@ -32,7 +34,8 @@ import numpy as np
 
 from pmpm.core.kernels.affine import (D_FLOOR, affine_moments, affine_momentum, cell_position,
                                       store_velocity_update)
-from pmpm.core.kernels.transfer import (block_buffers, block_start, gather2, gather_gradient, particle_forces,
+from pmpm.core.kernels.locate import stray
+from pmpm.core.kernels.transfer import (block_buffers, block_start, gather2, gather_gradient, move, particle_forces,
                                         scatter_p2g, strain_increment)
 from pmpm.core.shape import BLOCK
 
@@ -138,10 +141,18 @@ def _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy):
 
 @nb.njit(cache=True, fastmath={"contract"})
 def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
-            G, ox, oy, origin, inv_h, ncx, ncy, shape):
+            G, ox, oy, origin, inv_h, ncx, ncy, shape, impulse_dt=None):
     """Scatter mass, the APIC momentum m (v + C (x_i - x_p)) (``C`` (N, 4) in 1/s), the
     internal force -V sigma g_ip (MLS gradient; ``stress`` not None) and the external force
-    N_ip f_ext into fields 0 .. 4 of ``G``."""
+    N_ip f_ext into fields 0 .. 4 of ``G``.
+
+    ``impulse_dt`` (the step's dt; None: not) scatters, with quadratic and cubic B-splines,
+    the momentum and the force's impulse together, m v + dt f, into fields 1, 2 (fields 3, 4
+    get nothing): Hu et al.'s P2G, three fields a node instead of five. The grid update's
+    (m v + dt f) / m is then the same sum; what differs is a node lighter than the mass
+    cutoff, which gets its particles' impulse (a weighted mean of their impulse over mass,
+    bounded as their velocities are) where the separate force is held back. Linear B-splines
+    scatter the force apart either way."""
     with_force = stress is not None or gravity is not None or load_id is not None
     K, B, I0, J0, WX, WY = block_buffers(shape)
     h = 1.0 / inv_h
@@ -161,22 +172,47 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
             else:
                 ixx, ixy, iyy = _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy)
                 # A = (-V sigma / h) D^-1: the force N_i A (x_i - x_p), the form of the momentum's
-                _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mp * v[p, 0], mp * v[p, 1],
-                             affine, with_force, fx, fy,
-                             (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy,
-                              sxy * ixx + syy * ixy, sxy * ixy + syy * iyy))
+                A = (sxx * ixx + sxy * ixy, sxx * ixy + sxy * iyy, sxy * ixx + syy * ixy, sxy * ixy + syy * iyy)
+                if impulse_dt is not None and with_force:   # m v + dt f into the momentum's fields
+                    dt = impulse_dt
+                    _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp,
+                                 mp * v[p, 0] + dt * fx, mp * v[p, 1] + dt * fy,
+                                 (affine[0] + dt * A[0], affine[1] + dt * A[1],
+                                  affine[2] + dt * A[2], affine[3] + dt * A[3]), False, 0.0, 0.0, A)
+                else:
+                    _scatter_mls(Gf, nf, row, q, K, I0, J0, WX, WY, ox, oy, sx, sy, mp, mp * v[p, 0], mp * v[p, 1],
+                                 affine, with_force, fx, fy, A)
 
 
 @nb.njit(cache=True, fastmath={"contract"})
 def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
-            strain, de, dw, F, vol, vol0, dq):
+            strain, de, dw, F, vol, vol0, dq, m=None, gravity=None, stress=None, owned=None):
     """v_p = sum N_ip v_i and C_p = sum v_i g_ip^T (1/s, into ``C``) from the grid velocities
-    in fields 1, 2; ``dx`` receives dt v_p (the move, applied later); the strain increment
-    dt sym C_p into ``de``, its spin into ``dw``, ``strain``, the volume and F (``F``, ``vol0``,
-    ``dq`` as pmpm.core.kernels.transfer.strain_increment's). Returns the largest particle speed
-    and the number of particles whose velocity or C is not finite."""
+    in fields 1, 2; ``dx`` receives dt v_p; the strain increment dt sym C_p into ``de``, its
+    spin into ``dw``, ``strain``, the volume and F (``F``, ``vol0``, ``dq`` as
+    pmpm.core.kernels.transfer.strain_increment's).
+
+    The step's particle passes after the G2P, in the same pass when asked (``None``: not,
+    compiled out; the scheme asks when nothing acts between them, pmpm.core.mls):
+
+    * ``m`` given: the move x += dx with the work of the body force ``gravity`` (None: none)
+      over it (pmpm.core.kernels.transfer.move), and the particle's place after it counted as
+      pmpm.core.kernels.locate.count_strays counts it, ``owned`` = (axis, c0, c1) the owned
+      cell columns (the particle's x is read for its weights before it moves);
+    * ``stress`` given: the first half of the step's trapezoid internal work, sum_p V_p
+      sigma_p : de_p with the stress before its update and the new volume
+      (pmpm.core.kernels.grid_ops.stress_power, as the solver's update_stress takes it).
+
+    Returns (largest particle speed, number of particles whose velocity or C is not finite,
+    work of the body force over the moves, the stress power sum, outside, leaving, inverted);
+    the last five are 0 for a part not asked."""
     vmax2 = 0.0
     bad = 0
+    work = 0.0
+    power = 0.0
+    outside = 0
+    leaving = 0
+    inverted = 0
     K, B, I0, J0, WX, WY = block_buffers(shape)
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
@@ -200,4 +236,12 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
                 cyy = (byx * ixy + byy * iyy) * inv_h
             vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             strain_increment(p, dt, cxx, cxy, cyx, cyy, de, dw, strain, vol, F, vol0, dq)
-    return vmax2 ** 0.5, bad
+            if stress is not None:
+                power += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
+            if m is not None:
+                work += move(p, x, dx, m, gravity, None, None, None)
+                o, lv, inv = stray(x, vol, p, origin, inv_h, ncx, ncy, owned[0], owned[1], owned[2])
+                outside += o
+                leaving += lv
+                inverted += inv
+    return vmax2 ** 0.5, bad, work, power, outside, leaving, inverted

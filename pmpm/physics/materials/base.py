@@ -178,6 +178,16 @@ class Material:
         """
         raise NotImplementedError
 
+    #: True when ``update_stress_power`` sums the stress power in the update's own pass
+    sums_power = False
+
+    def update_stress_power(self, stress, de, vol, state, mat_ids, which):
+        """``update_stress`` that also returns sum_p V_p sigma_p : de_p (``vol`` (N,)) over the
+        particles it updated, with their new stress: the second half of the step's trapezoid
+        internal work in the update's pass rather than a pass of its own (a material that says
+        ``sums_power``; the solver takes the separate pass for the others)."""
+        raise NotImplementedError
+
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
         """The stiffness of the stress update for the implicit integrator: into ``D`` (N, 3, 3)
         d(sxx, syy, sxy) / d(dexx, deyy, dgxy) of the increment ``de`` that took ``stress0``,

@@ -58,14 +58,35 @@ def _update_elastic(stress, de, params, plane_strain, mat_ids, which):
             stress[p, k] += ds[k]
 
 
+@nb.njit(cache=True)
+def _update_elastic_power(stress, de, vol, params, plane_strain, mat_ids, which):
+    """``_update_elastic`` summing V sigma : de with the new stress as it goes (the solver's
+    second half of the internal work, pmpm.core.kernels.grid_ops.stress_power's terms)."""
+    E, nu = params[0], params[1]
+    power = 0.0
+    for p in range(stress.shape[0]):
+        if which >= 0 and mat_ids[p] != which:
+            continue
+        ds = elastic_increment(E, nu, plane_strain, de[p, 0], de[p, 1], de[p, 2])
+        for k in range(4):
+            stress[p, k] += ds[k]
+        power += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
+    return power
+
+
 class LinearElastic(Material):
     """Isotropic linear elasticity, plane stress or plane strain."""
 
     name = "linear_elastic"
     has_tangent = True
 
+    sums_power = True
+
     def update_stress(self, stress, de, state, mat_ids, which):
         _update_elastic(stress, de, self.params, self.plane_strain, mat_ids, which)
+
+    def update_stress_power(self, stress, de, vol, state, mat_ids, which):
+        return _update_elastic_power(stress, de, vol, self.params, self.plane_strain, mat_ids, which)
 
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
         """The elastic matrix (the update is linear: its tangent is exact)."""
