@@ -21,6 +21,12 @@ factorisation is most of an iteration on the frames, docs/implicit.md). Where th
 stays elastic the tangent hardly changes from step to step, and most steps then factor
 nothing; where it yields the rate test brings the factorisations back.
 
+``"krylov"`` assembles the tangent at every iteration as ``"full"`` does (the consistent
+tangent: quadratic convergence), and the linear solver (pmpm.core.implicit.linear_solver)
+solves it by GMRES preconditioned with a kept factorisation, refactored only when the GMRES
+stalls (pmpm.core.implicit.kept_factorisation): a factorisation serves many iterations and
+steps, also where the structure yields.
+
 Line search (``line_search = true``; off by default): the step length s is halved while the
 energy slope along the correction does not shrink, |du . R(u + s du)| > |du . R(u)|
 (Crisfield's criterion), at most ``LINE_SEARCH_CUTS`` times. Not the residual norm: the
@@ -67,7 +73,7 @@ def newton(problem, u, opts, history=None):
     -------
     int
         Iterations taken (each a linear solve; with ``newton = "modified"`` fewer of them
-        assemble and factor the tangent: ``problem.factorisations`` counts those).
+        assemble the tangent: ``problem.tangents`` counts those, ``linear.factorisations`` the factorisations).
     """
     r, norm = problem.residual(u)
     scale = max(norm, problem.force_scale)
