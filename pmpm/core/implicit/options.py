@@ -13,7 +13,7 @@
                                    # | "krylov": as "modified", each new tangent solved by GMRES
                                    # on a kept factorisation, refactored when the GMRES stalls
     krylov_tolerance = 1e-6        # "krylov": the GMRES's relative residual tolerance
-    krylov_iterations = 30         # "krylov": GMRES iterations before the factorisation is renewed
+    krylov_iterations = 10         # "krylov": GMRES iterations before the factorisation is renewed
     line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
     hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
@@ -57,7 +57,7 @@ KRYLOV_KEYS = ("krylov_tolerance", "krylov_iterations")
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
                      "newton": "full", "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False,
-                     "krylov_tolerance": 1e-6, "krylov_iterations": 30}
+                     "krylov_tolerance": 1e-6, "krylov_iterations": 10}
 
 
 def read_integrator(t):
