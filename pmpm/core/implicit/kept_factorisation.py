@@ -47,6 +47,7 @@ class KeptFactorisation:
         self.keys = None          # P's owned rows' names (global grid node index * 2 + component)
         self.identity = True      # the current rows are P's rows, in P's order
         self.factorisations = 0
+        self.remapped = 0         # operators whose rows were mapped onto P's (changed unknowns)
 
     @property
     def ready(self):
@@ -56,14 +57,14 @@ class KeptFactorisation:
         """P = a copy of A (collective), factored now; ``keys``: A's owned rows' names."""
         PETSc = self.PETSc
         P = A.copy()
-        if self.ksp is None:
-            self.ksp = PETSc.KSP().create(comm=self.comm)
-            self.ksp.setOptionsPrefix(self.prefix)
+        # a new solver each time (P is a new matrix: its analysis is redone anyway; a KSP once
+        # set up refuses an operator of other local sizes). Collective, as factor is.
+        self.release()
+        self.ksp = PETSc.KSP().create(comm=self.comm)
+        self.ksp.setOptionsPrefix(self.prefix)
         self.ksp.setOperators(P)
         self.ksp.setFromOptions()
         self.ksp.setUp()             # the factorisation
-        if self.P is not None:
-            self.P.destroy()
         self.P = P
         self.b, self.z = P.createVecs()
         self.keys = keys.copy()
@@ -78,6 +79,7 @@ class KeptFactorisation:
             self.identity = True
             return
         self.identity = False
+        self.remapped += 1
         _, self.old_rows, self.new_rows = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
         d = A.getDiagonal()
         diag = d.array.copy()
