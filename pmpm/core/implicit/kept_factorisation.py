@@ -47,7 +47,6 @@ class KeptFactorisation:
         self.keys = None          # P's owned rows' names (global grid node index * 2 + component)
         self.identity = True      # the current rows are P's rows, in P's order
         self.factorisations = 0
-        self.remapped = 0         # operators whose rows were mapped onto P's (changed unknowns)
 
     @property
     def ready(self):
@@ -71,30 +70,31 @@ class KeptFactorisation:
         self.identity = True
         self.factorisations += 1
 
-    def fit(self, A, keys):
-        """Map the rows named ``keys`` (the current operator A's owned rows) onto P's (rank-local)."""
+    def fit(self, keys, diagonal):
+        """Map the rows named ``keys`` (the current operator's owned rows, ``diagonal`` its
+        owned diagonal) onto P's. Rank-local: no PETSc call here."""
         if self.P is None:
             return
         if keys.shape == self.keys.shape and np.array_equal(keys, self.keys):
             self.identity = True
             return
         self.identity = False
-        self.remapped += 1
         _, self.old_rows, self.new_rows = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
-        d = A.getDiagonal()
-        diag = d.array.copy()
-        d.destroy()
         # a new row: a Jacobi step (its diagonal holds at least the mass term in dynamics and
         # the stand-in of a held component; a zero one, a statics node with no stiffness yet,
         # gets nothing)
-        self.inv_diag = np.divide(1.0, diag, out=np.zeros_like(diag), where=diag != 0.0)
+        self.inv_diag = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal != 0.0)
 
     def apply(self, pc, x, y):
         """y = P^-1 x on the shared rows (P's numbering), a Jacobi step on the new ones."""
-        if self.identity:
-            self.ksp.solve(x, y)
-            return
         xa = x.array_r
+        if self.identity:
+            # this rank's rows are P's, but another rank's may not be: P's vectors, not x and y
+            # (whose global size is the current operator's)
+            self.b.array[:] = xa
+            self.ksp.solve(self.b, self.z)
+            y.array[:] = self.z.array_r
+            return
         self.b.array[:] = 0.0
         self.b.array[self.old_rows] = xa[self.new_rows]
         self.ksp.solve(self.b, self.z)

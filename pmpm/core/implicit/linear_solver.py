@@ -174,6 +174,9 @@ class LinearSolver:
             ref = weakref.ref(self)
             atexit.register(lambda: ref() is not None and ref().destroy())
         self._keys = None
+        #: operators whose rows some rank mapped onto the kept factorisation's (changed unknowns)
+        self.remapped = 0
+        self._refactor_next = False
         #: (active, held) node masks of the step whose tangent the operator holds (GridProblem)
         self.unknowns = None
 
@@ -212,7 +215,15 @@ class LinearSolver:
             self.factorisations += 1
             return
         self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
-        self.kept.fit(self.A, self._keys)
+        d = self.A.getDiagonal()   # (collective: on every rank, whether its rows changed or not)
+        self.kept.fit(self._keys, d.array.copy())
+        d.destroy()
+        if self.kept.ready and self.comm.allreduce(0 if self.kept.identity else 1):
+            self.remapped += 1
+        if self._refactor_next:
+            # the last solve needed more than half the GMRES's budget (the same count on every
+            # rank): factor this operator now rather than spend the budget again
+            self._factor_kept()
 
     def _build(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
         PETSc = self.PETSc
@@ -306,9 +317,12 @@ class LinearSolver:
             self.iterations += max(self.ksp.getIterationNumber(), 1)
         if reason < 0:
             raise ArithmeticError(f"the linear solver diverged (KSP reason {reason})")
+        if self.kept is not None:
+            self._refactor_next = 2 * self.ksp.getIterationNumber() > self.krylov[1]
         return self.x.array.copy()
 
     def _factor_kept(self):
+        self._refactor_next = False
         self.kept.factor(self.A, self._keys)
         self.factorisations += 1
 

@@ -291,7 +291,7 @@ class ImplicitNewmark:
             self.stats["factorisations"] = self.linear.factorisations
             self.stats["linear_iterations"] = self.linear.iterations
             if self.linear.kept is not None:   # newton = "krylov": tangents whose unknowns had changed
-                self.stats["remapped_tangents"] = self.linear.kept.remapped
+                self.stats["remapped_tangents"] = self.linear.remapped
         if not self.options_checked and self.linear.ksp is not None:   # after the first solve
             self.linear.check_unused()
             self.options_checked = True
