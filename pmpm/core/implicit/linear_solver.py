@@ -177,6 +177,7 @@ class LinearSolver:
         #: operators whose rows some rank mapped onto the kept factorisation's (changed unknowns)
         self.remapped = 0
         self._refactor_next = False
+        self._extra = 0             # GMRES iterations beyond one a solve since the last factorisation
         #: (active, held) node masks of the step whose tangent the operator holds (GridProblem)
         self.unknowns = None
 
@@ -220,10 +221,7 @@ class LinearSolver:
         d.destroy()
         if self.kept.ready and self.comm.allreduce(0 if self.kept.identity else 1):
             self.remapped += 1
-        if self._refactor_next:
-            # the last solve needed more than half the GMRES's budget (the same count on every
-            # rank): factor this operator now rather than spend the budget again
-            self._factor_kept()
+
 
     def _build(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
         PETSc = self.PETSc
@@ -300,7 +298,7 @@ class LinearSolver:
         """The owned part of A^-1 rhs (``rhs``: this rank's owned rows). Raises
         ``ArithmeticError`` when the Krylov solver reports divergence."""
         self.b.array[:] = rhs
-        if self.kept is not None and not self.kept.ready:
+        if self.kept is not None and (not self.kept.ready or self._refactor_next):
             self._factor_kept()
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()
@@ -318,11 +316,17 @@ class LinearSolver:
         if reason < 0:
             raise ArithmeticError(f"the linear solver diverged (KSP reason {reason})")
         if self.kept is not None:
-            self._refactor_next = 2 * self.ksp.getIterationNumber() > self.krylov[1]
+            # the back-substitutions beyond one a solve are what the kept factorisation costs over
+            # a fresh one; once they add up to the GMRES's budget (about a factorisation's cost
+            # when the budget is the ratio of the two: docs/implicit.md), the next solve factors
+            # the operator it has. (The counts are the same on every rank: a collective decision.)
+            self._extra += self.ksp.getIterationNumber() - 1
+            self._refactor_next = self._extra >= self.krylov[1]
         return self.x.array.copy()
 
     def _factor_kept(self):
         self._refactor_next = False
+        self._extra = 0
         self.kept.factor(self.A, self._keys)
         self.factorisations += 1
 
