@@ -9,9 +9,10 @@ tangent of a step or two earlier differs from the current one only in the few pa
 state changed: P^-1 K is then the identity plus a perturbation of small rank, and a flexible
 GMRES on K preconditioned by P^-1 (one back-substitution per Krylov iteration) converges in a
 few iterations to the *current* tangent's solution. Newton therefore keeps the consistent
-tangent (quadratic convergence) while a factorisation serves many steps; the linear solver
-refactors P from the current tangent only when the Krylov solve does not converge within its
-iteration budget (pmpm.core.implicit.linear_solver).
+tangent while a factorisation serves many steps; the linear solver refactors P from the
+current operator when the Krylov solve does not converge within its iteration budget, or once
+the back-substitutions beyond one a solve since the last factorisation add up to that budget
+(pmpm.core.implicit.linear_solver).
 
 Changed unknowns. The active nodes change as particles cross cells, so the current system's
 rows need not be P's rows. Every row is named by its node's global grid index (and component);
