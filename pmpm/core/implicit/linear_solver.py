@@ -14,13 +14,16 @@ the edge of the material, and exact, so the Newton iterations see only the tange
 petsc4py is imported when the first implicit solver is built (``petsc``): an explicit run
 never initialises PETSc.
 """
+import atexit
 import ctypes
 import glob
 import logging
 import os
+import weakref
 
 import numpy as np
 
+from pmpm.core.implicit.kept_factorisation import KeptFactorisation
 from pmpm.errors import ConfigError
 
 __all__ = ["LinearSolver", "validate_options", "petsc", "DEFAULT_OPTIONS", "PREFIX", "check_option_names", "command_line_options"]
@@ -133,9 +136,15 @@ class LinearSolver:
     comm : mpi4py communicator
     options : dict
         PETSc options (name without the leading dash -> value) over ``DEFAULT_OPTIONS``.
+    krylov : (float, int), optional
+        ``newton = "krylov"``: (relative tolerance, iterations) of a flexible GMRES on each
+        operator, preconditioned by a kept factorisation of an earlier one (the options'
+        solver: pmpm.core.implicit.kept_factorisation), refactored from the current operator
+        when the GMRES does not converge within the iterations. None: the options' solver on
+        each operator (by default a new LU factorisation of each).
     """
 
-    def __init__(self, comm, options):
+    def __init__(self, comm, options, krylov=None):
         self.PETSc = petsc()
         self.comm = comm
         self.options = dict(DEFAULT_OPTIONS)
@@ -154,6 +163,21 @@ class LinearSolver:
         self._sizes = None
         self._pattern = None
         self.iterations = 0
+        #: factorisations (direct solves: one for each operator; ``krylov``: of the kept one)
+        self.factorisations = 0
+        self.krylov = krylov
+        self.kept = KeptFactorisation(self.PETSc, comm, PREFIX) if krylov is not None else None
+        if self.kept is not None:
+            # the python preconditioner's objects go before PETSc finalises (petsc4py's own
+            # exit handler, registered earlier, runs later): destroyed after it, at garbage
+            # collection, they crash the process on its way out
+            ref = weakref.ref(self)
+            atexit.register(lambda: ref() is not None and ref().destroy())
+        self._keys = None
+        #: operators whose rows some rank mapped onto the kept factorisation's (changed unknowns)
+        self.remapped = 0
+        self._refactor_next = False
+        self._extra = 0             # GMRES iterations beyond one a solve since the last factorisation
         #: (active, held) node masks of the step whose tangent the operator holds (GridProblem)
         self.unknowns = None
 
@@ -179,12 +203,27 @@ class LinearSolver:
                 raise ConfigError(f"solver.petsc.{name}", "PETSc did not use this option (unknown name, or "
                                                           "it does not apply to the chosen solver)")
 
-    def set_operator(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
+    def set_operator(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz, keys=None):
         """Build this step's matrix: ``n_owned`` nodes owned here (rows 2 start .. 2 (start +
         n_owned)), and the blocks this rank assembled in block-CSR form: block rows ``rows``
         (global node numbers, ghosts included), ``indptr``/``cols`` their column nodes,
         ``values`` (nnz, 2, 2). ``diag_nnz``/``off_nnz``: blocks per owned row in the owned and
-        the other columns (preallocation)."""
+        the other columns (preallocation). ``keys``: names of the owned rows that stay the
+        same from step to step (``krylov`` only: the kept factorisation's rows are matched by
+        them; default their global numbers)."""
+        self._build(n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz)
+        if self.kept is None:
+            self.factorisations += 1
+            return
+        self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
+        d = self.A.getDiagonal()   # (collective: on every rank, whether its rows changed or not)
+        self.kept.fit(self._keys, d.array.copy())
+        d.destroy()
+        if self.kept.ready and self.comm.allreduce(0 if self.kept.identity else 1):
+            self.remapped += 1
+
+
+    def _build(self, n_owned, start, rows, indptr, cols, values, diag_nnz, off_nnz):
         PETSc = self.PETSc
         pattern = (rows.copy(), indptr.copy(), cols.copy())
         same = self.A is not None and self._sizes[0][0] == 2 * n_owned and all(
@@ -198,7 +237,8 @@ class LinearSolver:
                                        rowmap=rows.astype(PETSc.IntType))
             self.A.assemblyBegin()
             self.A.assemblyEnd()
-            self.ksp.setOperators(self.A)
+            if self.kept is None:
+                self.ksp.setOperators(self.A)
             return
         self._pattern = pattern
         A = PETSc.Mat().create(comm=self.comm)
@@ -218,6 +258,9 @@ class LinearSolver:
         if self.A is not None:
             self.A.destroy()
         self.A = A
+        if self.kept is not None:
+            self._krylov_solver(A)
+            return
         resized = self.ksp is not None and self._sizes != A.getSizes()
         # decided together: a rank whose own rows kept their number while a neighbour's changed
         # must destroy the solver too (KSPDestroy is collective; deciding alone deadlocked 3 ranks)
@@ -234,18 +277,65 @@ class LinearSolver:
         self.ksp.setFromOptions()
         self.x, self.b = A.createVecs()
 
+    def _krylov_solver(self, A):
+        """A new operator of the ``krylov`` mode (the new-matrix path, taken on every rank
+        together): a flexible GMRES on it with the kept factorisation as its preconditioner
+        (a python PC; FGMRES because the options may make the inner solve an iterative one)."""
+        PETSc = self.PETSc
+        if self.ksp is not None:
+            self.ksp.destroy()
+        ksp = PETSc.KSP().create(comm=self.comm)
+        ksp.setType(PETSc.KSP.Type.FGMRES)
+        rtol, its = self.krylov
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=its)
+        ksp.setGMRESRestart(max(its, 1))
+        ksp.setOperators(A)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.PYTHON)
+        pc.setPythonContext(self.kept)
+        self.ksp = ksp
+        self._sizes = A.getSizes()
+        self.x, self.b = A.createVecs()
+
     def solve(self, rhs):
         """The owned part of A^-1 rhs (``rhs``: this rank's owned rows). Raises
         ``ArithmeticError`` when the Krylov solver reports divergence."""
         self.b.array[:] = rhs
+        if self.kept is not None and (not self.kept.ready or self._refactor_next):
+            self._factor_kept()
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()
         self.iterations += max(self.ksp.getIterationNumber(), 1)
+        if reason < 0 and self.kept is not None:
+            # the kept factorisation no longer fits the operator (the same reason on every
+            # rank: the decision is collective): factor the current one and solve again
+            logger.debug("kept factorisation: %d Krylov iterations without convergence (reason %d), refactored",
+                         self.ksp.getIterationNumber(), reason)
+            self._factor_kept()
+            self.x.set(0.0)
+            self.ksp.solve(self.b, self.x)
+            reason = self.ksp.getConvergedReason()
+            self.iterations += max(self.ksp.getIterationNumber(), 1)
         if reason < 0:
             raise ArithmeticError(f"the linear solver diverged (KSP reason {reason})")
+        if self.kept is not None:
+            # the back-substitutions beyond one a solve are what the kept factorisation costs over
+            # a fresh one; once they add up to the GMRES's budget (about a factorisation's cost
+            # when the budget is the ratio of the two: docs/implicit.md), the next solve factors
+            # the operator it has. (The counts are the same on every rank: a collective decision.)
+            self._extra += self.ksp.getIterationNumber() - 1
+            self._refactor_next = self._extra >= self.krylov[1]
         return self.x.array.copy()
 
+    def _factor_kept(self):
+        self._refactor_next = False
+        self._extra = 0
+        self.kept.factor(self.A, self._keys)
+        self.factorisations += 1
+
     def destroy(self):
+        if self.kept is not None:
+            self.kept.release()
         for obj in (self.ksp, self.A):
             if obj is not None:
                 obj.destroy()

@@ -21,6 +21,15 @@ factorisation is most of an iteration on the frames, docs/implicit.md). Where th
 stays elastic the tangent hardly changes from step to step, and most steps then factor
 nothing; where it yields the rate test brings the factorisations back.
 
+``"krylov"`` assembles the tangent where ``"modified"`` would refactor it (at the iterate
+where the rate was slow: the iterations after it are Newton's with that iterate's consistent
+tangent), and the linear solver (pmpm.core.implicit.linear_solver) solves it by GMRES
+preconditioned with a kept factorisation, refactored only when the GMRES stalls
+(pmpm.core.implicit.kept_factorisation): the iterates are those of ``"modified"`` to the
+GMRES's tolerance, but a factorisation serves many tangents and steps, also where the
+structure yields. (Assembling at every iteration, as ``"full"`` does, was measured slower on
+the frame: an assembly and a few back-substitutions cost more than the iterations saved.)
+
 Line search (``line_search = true``; off by default): the step length s is halved while the
 energy slope along the correction does not shrink, |du . R(u + s du)| > |du . R(u)|
 (Crisfield's criterion), at most ``LINE_SEARCH_CUTS`` times. Not the residual norm: the
@@ -67,12 +76,14 @@ def newton(problem, u, opts, history=None):
     -------
     int
         Iterations taken (each a linear solve; with ``newton = "modified"`` fewer of them
-        assemble and factor the tangent: ``problem.factorisations`` counts those).
+        assemble the tangent: ``problem.tangents`` counts those, ``linear.factorisations`` the factorisations).
     """
     r, norm = problem.residual(u)
     scale = max(norm, problem.force_scale)
     energy0 = None
-    modified = opts.get("newton", "full") == "modified"
+    # "krylov" assembles the tangent where "modified" would refactor it (the linear solver then
+    # solves it on its kept factorisation: pmpm.core.implicit.kept_factorisation)
+    modified = opts.get("newton", "full") in ("modified", "krylov")
     refactor = not (modified and problem.factorisation_fits())
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):

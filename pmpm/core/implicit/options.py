@@ -10,6 +10,10 @@
     energy_tolerance = 1e-12       # |du . R| <= tol * |du_0 . R_0|
     max_iterations = 25            # Newton iterations before the step is halved
     newton = "full"                # | "modified": refactor the tangent only where the rate is slow
+                                   # | "krylov": as "modified", each new tangent solved by GMRES
+                                   # on a kept factorisation, refactored when the GMRES stalls
+    krylov_tolerance = 1e-6        # "krylov": the GMRES's relative residual tolerance
+    krylov_iterations = 10         # "krylov": GMRES iterations before the factorisation is renewed
     line_search = false            # halve the step while the energy slope grows (Crisfield)
     max_halvings = 6               # smallest step: time_step / 2^max_halvings
     hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
@@ -46,11 +50,14 @@ __all__ = ["read_integrator", "INTEGRATORS", "ANALYSES", "IMPLICIT_DEFAULTS", "r
 INTEGRATORS = ("explicit", "implicit")
 ANALYSES = ("dynamic", "static")
 #: tangent updates of Newton's iterations (pmpm.core.implicit.newton)
-NEWTON_VARIANTS = ("full", "modified")
+NEWTON_VARIANTS = ("full", "modified", "krylov")
+#: the keys of newton = "krylov" alone (refused with the other variants: they would do nothing)
+KRYLOV_KEYS = ("krylov_tolerance", "krylov_iterations")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
-                     "newton": "full", "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False}
+                     "newton": "full", "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False,
+                     "krylov_tolerance": 1e-6, "krylov_iterations": 10}
 
 
 def read_integrator(t):
@@ -85,7 +92,15 @@ def read_implicit(t):
            # HHT-alpha: 0 is the trapezoidal rule, -1/3 the most damping of the high modes
            "hht_alpha": t.number("hht_alpha", d["hht_alpha"], low=-1.0 / 3.0, high=0.0),
            # gravity (and the loads at the start) to static equilibrium before the dynamics
-           "initial_static": t.boolean("initial_static", d["initial_static"])}
+           "initial_static": t.boolean("initial_static", d["initial_static"]),
+           # newton = "krylov": the GMRES on each tangent (pmpm.core.implicit.kept_factorisation)
+           "krylov_tolerance": t.number("krylov_tolerance", d["krylov_tolerance"], low=0.0, high=1.0,
+                                        low_open=True, high_open=True),
+           "krylov_iterations": t.integer("krylov_iterations", d["krylov_iterations"], low=1, high=1000)}
+    if out["newton"] != "krylov":
+        for key in KRYLOV_KEYS:
+            if t.has(key):
+                raise ConfigError(t.path(key), f"sets the GMRES of newton = \"krylov\" (newton is {out['newton']!r})")
     t.finish()
     return out
 

@@ -94,7 +94,7 @@ class GridProblem:
         self.D = np.empty((n, 3, 3))
         self.free = ~self.dofs.held[self.dofs.owned_active].reshape(-1)
         self.evaluations = 0
-        self.factorisations = 0
+        self.tangents = 0
         self._evaluated = None
         self.force_scale = 0.0
         # the effects' terms (pmpm.core.implicit.terms): their forces at the step's start
@@ -182,9 +182,17 @@ class GridProblem:
         nrows, nnz = blocks_to_csr(Kb, d.lid, node_i, node_j, d.gid, d.held, diag, d.row_owned, span,
                                    rows, indptr, cols, vals)
         self.linear.set_operator(d.n_owned, d.start, rows[:nrows], indptr[:nrows + 1], cols[:nnz],
-                                 vals[:nnz], d.diag_nnz, d.off_nnz)
+                                 vals[:nnz], d.diag_nnz, d.off_nnz, self._row_keys())
         self.linear.unknowns = (d.active.copy(), d.held.copy())
-        self.factorisations += 1
+        self.tangents += 1
+
+    def _row_keys(self):
+        """Names of the owned rows that do not depend on the step's numbering: 2 (global grid
+        node index) + component (a kept factorisation's rows are matched by them)."""
+        w, g = self.s.window, self.s.grid
+        i, j = np.nonzero(self.dofs.owned_active)
+        node = (i + w.ox).astype(np.int64) * (g.cells[1] + 1) + (j + w.oy)
+        return (2 * node[:, None] + np.arange(2)).reshape(-1)
 
     def factorisation_fits(self):
         """Whether the linear solver holds a factorisation (of an earlier step's tangent) whose

@@ -57,7 +57,7 @@ class ImplicitNewmark:
         self.linear = None
         self.fraction = 1.0        # current step length / the scene's step
         self.converged_in_row = 0
-        self.stats = {"steps": 0, "newton_iterations": 0, "factorisations": 0, "residual_evaluations": 0,
+        self.stats = {"steps": 0, "newton_iterations": 0, "factorisations": 0, "tangents": 0, "residual_evaluations": 0,
                       "linear_iterations": 0, "halvings": 0}
         self.history = []          # (|R|, energy) of the last step's iterations
         self.held_force = np.zeros(2)   # sum of the nodal forces on held components (last step)
@@ -120,10 +120,10 @@ class ImplicitNewmark:
                 self.converged_in_row = 0
         if s.t + dt >= s.options.end_time * (1.0 - 1e-12) and s.decomp.rank == 0:
             st = self.stats
-            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d factorisations, "
+            logger.info("implicit: %d steps, %d Newton iterations (%.2f a step), %d tangents, %d factorisations, "
                         "%d residual evaluations, %d linear iterations, %d halvings", st["steps"],
                         st["newton_iterations"], st["newton_iterations"] / max(st["steps"], 1),
-                        st["factorisations"], st["residual_evaluations"],
+                        st["tangents"], st["factorisations"], st["residual_evaluations"],
                         st["linear_iterations"], st["halvings"])
 
     def summary(self, s):
@@ -154,7 +154,10 @@ class ImplicitNewmark:
         """First call: the PETSc solver, the options, and Newmark's start accelerations."""
         if self.linear is not None:
             return
-        self.linear = LinearSolver(s.comm, self.petsc)
+        krylov = None
+        if self.options.get("newton") == "krylov":
+            krylov = (self.options["krylov_tolerance"], self.options["krylov_iterations"])
+        self.linear = LinearSolver(s.comm, self.petsc, krylov)
         # what the effects add to the step (pmpm.core.implicit.terms)
         self.terms = [t for t in (e.implicit_term(s) for e in s.effects) if t is not None]
         if ACCELERATION not in s.particles.fields:
@@ -284,8 +287,11 @@ class ImplicitNewmark:
             raise NewtonFailed(str(exc)) from None
         finally:
             self.stats["residual_evaluations"] += problem.evaluations
-            self.stats["factorisations"] += problem.factorisations
+            self.stats["tangents"] += problem.tangents
+            self.stats["factorisations"] = self.linear.factorisations
             self.stats["linear_iterations"] = self.linear.iterations
+            if self.linear.kept is not None:   # newton = "krylov": tangents whose unknowns had changed
+                self.stats["remapped_tangents"] = self.linear.remapped
         if not self.options_checked and self.linear.ksp is not None:   # after the first solve
             self.linear.check_unused()
             self.options_checked = True

@@ -1,0 +1,112 @@
+"""A factorisation of an earlier tangent as the preconditioner of a Krylov solve of the current
+one (``[solver.implicit] newton = "krylov"``; docs/implicit.md, "Krylov solves on a kept
+factorisation").
+
+Newton's correction solves K(u) du = R with K the tangent of the current iterate. A direct
+solve factors K every time it changes: at 0.05 m cells on the three-storey frame a MUMPS
+factorisation costs 2-3 s, and where the frame yields the tangent changes every step. The
+tangent of a step or two earlier differs from the current one only in the few particles whose
+state changed: P^-1 K is then the identity plus a perturbation of small rank, and a flexible
+GMRES on K preconditioned by P^-1 (one back-substitution per Krylov iteration) converges in a
+few iterations to the *current* tangent's solution. Newton therefore keeps the consistent
+tangent while a factorisation serves many steps; the linear solver refactors P from the
+current operator when the Krylov solve does not converge within its iteration budget, or once
+the back-substitutions beyond one a solve since the last factorisation add up to that budget
+(pmpm.core.implicit.linear_solver).
+
+Changed unknowns. The active nodes change as particles cross cells, so the current system's
+rows need not be P's rows. Every row is named by its node's global grid index (and component);
+the preconditioner maps the rows the two systems share onto P's numbering (on this rank: a node
+P's rank owned and this rank still owns; a node that changed owner counts as new), applies P^-1
+with zero on P's rows that left, and gives the new rows a Jacobi step on the current diagonal.
+The mapping is rank-local (no collective decision), and only the Krylov iteration count, which
+is the same on every rank, decides whether to refactor: a preconditioner that fits badly costs
+iterations, never a wrong answer.
+"""
+import numpy as np
+
+__all__ = ["KeptFactorisation"]
+
+
+class KeptFactorisation:
+    """The python-PC context holding P (a copy of a tangent), its factorisation and the map
+    from the current rows onto P's.
+
+    Parameters
+    ----------
+    PETSc : module
+    comm : mpi4py communicator
+    prefix : str
+        The options prefix of the inner solve (the scene's ``[solver.petsc]`` options: by
+        default LU by MUMPS with ``ksp_type = "preonly"``).
+    """
+
+    def __init__(self, PETSc, comm, prefix):
+        self.PETSc, self.comm, self.prefix = PETSc, comm, prefix
+        self.P = None
+        self.ksp = None
+        self.keys = None          # P's owned rows' names (global grid node index * 2 + component)
+        self.identity = True      # the current rows are P's rows, in P's order
+        self.factorisations = 0
+
+    @property
+    def ready(self):
+        return self.P is not None
+
+    def factor(self, A, keys):
+        """P = a copy of A (collective), factored now; ``keys``: A's owned rows' names."""
+        PETSc = self.PETSc
+        P = A.copy()
+        # a new solver each time (P is a new matrix: its analysis is redone anyway; a KSP once
+        # set up refuses an operator of other local sizes). Collective, as factor is.
+        self.release()
+        self.ksp = PETSc.KSP().create(comm=self.comm)
+        self.ksp.setOptionsPrefix(self.prefix)
+        self.ksp.setOperators(P)
+        self.ksp.setFromOptions()
+        self.ksp.setUp()             # the factorisation
+        self.P = P
+        self.b, self.z = P.createVecs()
+        self.keys = keys.copy()
+        self.identity = True
+        self.factorisations += 1
+
+    def fit(self, keys, diagonal):
+        """Map the rows named ``keys`` (the current operator's owned rows, ``diagonal`` its
+        owned diagonal) onto P's. Rank-local: no PETSc call here."""
+        if self.P is None:
+            return
+        if keys.shape == self.keys.shape and np.array_equal(keys, self.keys):
+            self.identity = True
+            return
+        self.identity = False
+        _, self.old_rows, self.new_rows = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
+        # a new row: a Jacobi step (its diagonal holds at least the mass term in dynamics and
+        # the stand-in of a held component; a zero one, a statics node with no stiffness yet,
+        # gets nothing)
+        self.inv_diag = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal != 0.0)
+
+    def apply(self, pc, x, y):
+        """y = P^-1 x on the shared rows (P's numbering), a Jacobi step on the new ones."""
+        xa = x.array_r
+        if self.identity:
+            # this rank's rows are P's, but another rank's may not be: P's vectors, not x and y
+            # (whose global size is the current operator's)
+            self.b.array[:] = xa
+            self.ksp.solve(self.b, self.z)
+            y.array[:] = self.z.array_r
+            return
+        self.b.array[:] = 0.0
+        self.b.array[self.old_rows] = xa[self.new_rows]
+        self.ksp.solve(self.b, self.z)
+        ya = y.array
+        ya[:] = xa * self.inv_diag
+        ya[self.new_rows] = self.z.array_r[self.old_rows]
+
+    def release(self):
+        """Destroy P and its solver (not ``destroy``: PETSc calls a python PC context's
+        ``destroy(pc)`` when the PC goes)."""
+        for obj in (self.ksp, self.P):
+            if obj is not None:
+                obj.destroy()
+        self.ksp = self.P = None
