@@ -142,7 +142,8 @@ def compare(h, window=1.0e-4, end_time=2.2e-3, sp=None):
     ligament = sp["width"] - 2 * sp["radius"]
     gf_area = sp["fracture_energy"] * ligament * sp["thickness"]
     failed = r.frames["damage"][-1] >= 1.0
-    return {"h_mm": h * 1e3, "fracture_work_J": float(r.energies["fracture_work"][-1]),
+    lstar = sp.get("characteristic_length") or 0.0
+    return {"h_mm": h * 1e3, "lstar_over_h": lstar / h, "fracture_work_J": float(r.energies["fracture_work"][-1]),
             "fracture_work_over_GfA": float(r.energies["fracture_work"][-1]) / gf_area,
             "failed_points": int(failed.sum()),
             # the crack band's mean width in cells: the failed particles' area (h^2 / 4 each at
@@ -197,16 +198,29 @@ def surface_profile(h, times, sp=None, bins=(0.0, 0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3
 def refinement_table(rows):
     """pmpm's own refinement: initiation, its change from the previous size, the fracture
     energy dissipated by the end (over G_f times the ligament's area) and the force left."""
-    lines = ["| h (mm) | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | "
-             "band width (cells) | force at the end / FE peak |",
-             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    lines = ["| h (mm) | l* / h | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | "
+             "band width (cells) | force at the end / FE peak | wall pmpm (s) |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     prev = None
     for r in rows:
         change = "" if prev is None else f"{100 * (r['u_init_mpm_mm'] - prev) / prev:+.1f}%"
-        lines.append(f"| {r['h_mm']:.3g} | {r['u_init_mpm_mm']:.4f} | {change} | {r['fracture_work_J']:.3f} | "
-                     f"{r['fracture_work_over_GfA']:.3f} | {r['band_cells']:.2f} | {r['end_force_over_peak']:.3f} |")
+        lines.append(f"| {r['h_mm']:.3g} | {r['lstar_over_h']:.2f} | {r['u_init_mpm_mm']:.4f} | {change} | "
+                     f"{r['fracture_work_J']:.3f} | {r['fracture_work_over_GfA']:.3f} | {r['band_cells']:.2f} | "
+                     f"{r['end_force_over_peak']:.3f} | {r['wall_mpm_s']:.0f} |")
         prev = r["u_init_mpm_mm"]
+    if len(rows) >= 2:
+        a, b = rows[-2], rows[-1]
+        lines.append("")
+        lines.append(f"between the two finest grids ({a['h_mm']:.3g} and {b['h_mm']:.3g} mm), relative to the finer: "
+                     f"pmpm {100 * finest_step(rows, 'u_init_mpm_mm'):+.1f}%, "
+                     f"FE {100 * finest_step(rows, 'u_init_fe_mm'):+.1f}% (the issue's target: within 5%)")
     return "\n".join(lines)
+
+
+def finest_step(rows, key):
+    """The change of ``key`` from the second finest size to the finest, over the finest's value."""
+    a, b = sorted(rows, key=lambda r: -r["h_mm"])[-2:]
+    return (b[key] - a[key]) / b[key]
 
 
 def markdown_table(rows):
@@ -252,6 +266,8 @@ def main(argv=None):
     for size in args.sizes:
         row = compare(size * 1e-3, args.window, args.end_time, sp)
         rows.append(row)
+        # each size's figures as soon as they exist (the finest runs take long)
+        print(json.dumps({"size": {k: v for k, v in row.items() if k not in ("curve", "failed_x0")}}), flush=True)
         if args.curves:
             c = row["curve"]
             print(f"h = {size:g} mm: u (mm), pmpm, FE (kN)")

@@ -9,7 +9,7 @@ Kanvinde & Deierlein, dD = d(eps_p_eq) / (eta exp(-1.5 T)), no damage at T <= -1
 Cauchy stress at the end of each increment with szz = 0 (docs/fracture.md). The first point
 whose damage reaches 1 marks fracture initiation; with a ``characteristic_length`` l* in the
 specimen (the nonlocal criterion), the first point where the damage averaged over l* reaches
-1: a Gaussian weight of variance l*^2 / 12 per axis (that of a uniform average over a segment
+1 and its own damage too (pmpm's criterion: exceeded at the point and over l*): a Gaussian weight of variance l*^2 / 12 per axis (that of a uniform average over a segment
 of length l*) on the Gauss points' current positions, cut at 3 standard deviations, weighted by
 the points' areas and renormalised over the material within reach (neighbour lists built once
 on the initial points, 1.5 times wider than the cut), evaluated each step once some point's own
@@ -334,7 +334,8 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
                             wj = gw[j] * math.exp(-0.5 * d2 / (sigma * sigma))
                             num += wj * damage[j // 4, j % 4]
                             den += wj
-                    if den > 0.0 and num >= den:
+                    # and the point's own index (pmpm's fail_where: exceeded at the point and over l*)
+                    if den > 0.0 and num >= den and damage[i // 4, i % 4] >= 1.0:
                         failed_now = True
                         wx, wy = gx[i, 0], gx[i, 1]
                         break
