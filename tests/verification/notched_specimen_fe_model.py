@@ -52,7 +52,7 @@ __all__ = ["SPECIMEN", "mesh", "run", "polygon"]
 SPECIMEN = {
     "length": 0.1, "width": 0.04, "thickness": 0.01, "radius": 0.008, "pull": 2.0,
     "E": 200e9, "nu": 0.3, "density": 7850.0, "yield_stress": 355e6, "hardening": 0.01,
-    "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 4.0e-3,
+    "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 6.0e-3,
 }
 
 
