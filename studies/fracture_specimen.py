@@ -265,6 +265,8 @@ def main(argv=None):
                          "the nonlocal criterion")
     ap.add_argument("--characteristic-length", type=float, metavar="MM",
                     help="the nonlocal criterion's l* (mm) instead of the specimen's (6 mm)")
+    ap.add_argument("--pmpm-only", action="store_true",
+                    help="only pmpm's figures at each size (initiation, fracture work, band): no FE model, no tables")
     args = ap.parse_args(argv)
     sp = dict(fe_module().SPECIMEN)
     if args.characteristic_length:
@@ -279,6 +281,11 @@ def main(argv=None):
             local = dict(sp, characteristic_length=None)
             for t, name, vals in surface_profile(size * 1e-3, [v * 1e-3 for v in args.profile], local):
                 print(f"| {size:g} | {t * 1e3:.2f} | {name} | " + " | ".join(f"{v:.4f}" for v in vals) + " |")
+        return
+    if args.pmpm_only:
+        for size in args.sizes:
+            a = mpm(size * 1e-3, args.end_time, sp)
+            print(json.dumps({"pmpm": _mpm_figures(a, size * 1e-3, sp)}), flush=True)
         return
     rows = []
     for size in args.sizes:
