@@ -215,8 +215,8 @@ def surface_profile(h, times, sp=None, bins=(0.0, 0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3
 def refinement_table(rows):
     """pmpm's own refinement: initiation, its change from the previous size, the fracture
     energy dissipated by the end (over G_f times the ligament's area) and the force left."""
-    lines = ["| h (mm) | l* / h | u at initiation (mm) | change from previous | fracture work (J) | / (G_f A_ligament) | "
-             "band width (cells) | force at the end / FE peak | wall pmpm (s) |",
+    lines = ["| h (mm) | l* / h | u at initiation (mm) | change from previous | fracture work (J) | "
+             "/ (G_f A_ligament) | band width (cells) | force at the end / FE peak | wall pmpm (s) |",
              "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     prev = None
     for r in rows:

@@ -103,5 +103,6 @@ def test_refinement(rows):
                                if h < 0.002 else h for h in SIZES])
 def test_fracture_work_is_gf_times_the_ligament(rows, h):
     r = rows[h]
-    print(f"h = {h * 1e3:.3g} mm: fracture work {r['fracture_work_over_GfA']:.3f} G_f A, band {r['band_cells']:.2f} cells")
+    print(f"h = {h * 1e3:.3g} mm: fracture work {r['fracture_work_over_GfA']:.3f} G_f A, "
+          f"band {r['band_cells']:.2f} cells")
     assert 1.0 / study.BAND_CELLS <= r["fracture_work_over_GfA"] <= 1.5 / study.BAND_CELLS

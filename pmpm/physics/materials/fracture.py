@@ -21,10 +21,10 @@ Damage (docs/fracture.md has the sources and the choice of model)
     strain reaches the locus, which is also the stress-modified critical strain criterion.
 Nonlocal criterion (``characteristic_length`` l*)
     The increments above accumulate the point's own index (field ``vgm_index``), and the point
-    fails when the index averaged over l* and its own index have both reached 1 (:func:`fail_where`,
-    called by the effect pmpm.physics.fracture_nonlocal, which computes the average on the
-    grid); ``damage`` then holds the smaller of the two. Without l* the index is ``damage`` itself and a point fails where it
-    reaches 1.
+    fails when the index averaged over l* and its own index have both reached 1
+    (:func:`fail_where`, called by the effect pmpm.physics.fracture_nonlocal, which computes the
+    average on the grid); ``damage`` then holds the smaller of the two. Without l* the index is
+    ``damage`` itself and a point fails where it reaches 1.
 Failure (D = 1) and the release of its tension
     From then the material's own update advances an *effective* stress (field
     ``effective_stress``), and the stress the point transmits is its compressive principal
