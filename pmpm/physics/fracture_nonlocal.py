@@ -1,5 +1,6 @@
 """The nonlocal ductile fracture criterion: a point fails when the void growth index averaged
-over the material's characteristic length reaches 1 (docs/fracture.md, "The nonlocal criterion").
+over the material's characteristic length reaches 1, and its own index too (docs/fracture.md,
+"The nonlocal criterion").
 
 An effect (pmpm.core.effects) that exists only when a material's ``[materials.<label>.fracture]``
 names a ``characteristic_length`` l*. Kanvinde and Deierlein's void growth and SMCS criteria
@@ -34,7 +35,12 @@ largest value averaged, so before that no point can fail and the passes are skip
 maximum over the ranks per step). A point that fails there fails with the stress at the end of
 the previous step, exactly as the local criterion fails it in that step's update; the first
 fracture record (pmpm.physics.fracture_record) notes it at the end of this step, one step
-later. The intact points' ``damage`` is the average when it was last computed (0 before).
+later. A point fails only where its own index has reached 1 as well (the criterion exceeded
+at the point and over l*, :func:`pmpm.physics.materials.fracture.fail_where`): the average
+alone would also fail the points beside a running crack, within about l* / 2 of its path,
+whose own index is below 1, and the failed band, widening with l* / h, would dissipate more
+than G_f per unit crack area. The intact points' ``damage`` is the smaller of the average and
+their own index when last computed (0 before).
 The failed points' index is frozen at failure (their plastic strain since is the crack's
 opening, not void growth).
 """
@@ -156,4 +162,4 @@ class NonlocalFracture(Effect):
             if f > 0.0:
                 average = (1.0 - f) * average + f * self._smooth(s, average, which, 1)
             fp, damage, _, crack, eff = material.fracture_arguments(p.fields)
-            fail_where(average, p["mat"], which, p["stress"], eff, crack, damage, fp)
+            fail_where(average, index, p["mat"], which, p["stress"], eff, crack, damage, fp)

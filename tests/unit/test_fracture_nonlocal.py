@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from pmpm.physics.fracture_nonlocal import gather_index, nodal_average, scatter_index, smoothing_passes
+from pmpm.physics.materials.fracture import fail_where, kernel_params
 
 H = 0.01
 ORIGIN = np.array([0.0, 0.0])
@@ -102,3 +103,25 @@ def test_passes_give_the_variance_of_the_average_over_lstar(lstar, h):
     k, f = smoothing_passes(lstar, h)
     assert k >= 0 and 0.0 <= f < 1.0
     assert (k + f) * h * h / 3 == pytest.approx(lstar ** 2 / 12, rel=1e-12)
+
+
+def test_a_point_fails_only_where_its_own_index_and_the_average_both_reach_one():
+    """fail_where: the criterion exceeded at the point and over l* (docs/fracture.md, "The
+    nonlocal criterion"). Four points: average and own index both >= 1 (fails), the average
+    >= 1 but the own index below (a point beside a crack path, into which the average spreads
+    the path's index: stays intact), the own index >= 1 but the average below (a lone strained
+    point: intact), both below (intact); an intact point's damage is the smaller of the two.
+    Planted bug caught (checked once, then restored): the own index's condition left out (the
+    failure on the average alone, as before this test): the second point fails."""
+    settings = {"model": "void_growth", "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 0.006}
+    fp = kernel_params(settings, 200e9, 0.3, 0.002)
+    average = np.array([1.2, 1.05, 0.7, 0.4])
+    index = np.array([1.3, 0.8, 1.6, 0.5])
+    n = len(average)
+    stress = np.tile([400e6, 100e6, 20e6, 0.0], (n, 1))
+    eff, crack, damage = np.zeros((n, 4)), np.zeros((n, 2)), np.zeros(n)
+    count = fail_where(average, index, np.zeros(n, np.int32), -1, stress, eff, crack, damage, fp)
+    assert count == 1
+    assert damage[0] == 1.0 and crack[0, 1] > 0.0 and np.array_equal(eff[0], stress[0])
+    assert damage[1:].tolist() == [0.8, 0.7, 0.4]
+    assert not eff[1:].any() and not crack[1:].any()

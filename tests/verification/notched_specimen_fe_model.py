@@ -4,18 +4,18 @@ fracture initiation (issue 39, "notched or grooved flat specimen"), NumPy only.
 The specimen (:data:`SPECIMEN`): a plate 100 x 40 mm, 10 mm thick, with two semicircular edge
 notches of radius 8 mm at mid-length (ligament 24 mm), plane stress; held on its left face, its
 right face pulled at 2 m/s from rest. The material is the bilinear von Mises steel with linear
-Ziegler kinematic hardening (post-yield tangent alpha E) and the void growth damage of
-Kanvinde & Deierlein, dD = d(eps_p_eq) / (eta exp(-1.5 T)), no damage at T <= -1/3, T from the
-Cauchy stress at the end of each increment with szz = 0 (docs/fracture.md). The first point
-whose damage reaches 1 marks fracture initiation; with a ``characteristic_length`` l* in the
-specimen (the nonlocal criterion), the first point where the damage averaged over l* reaches
-1: a Gaussian weight of variance l*^2 / 12 per axis (that of a uniform average over a segment
-of length l*) on the Gauss points' current positions, cut at 3 standard deviations, weighted by
-the points' areas and renormalised over the material within reach (neighbour lists built once
-on the initial points, 1.5 times wider than the cut), evaluated each step once some point's own
-damage has reached 1 (the average cannot exceed the largest value). ``snapshots`` records the
-Gauss points' positions, eps_p_eq, damage and stresses at given times (the diagnosis of
-docs/fracture.md).
+Ziegler kinematic hardening (post-yield tangent alpha E) and the void growth damage of Kanvinde
+& Deierlein, dD = d(eps_p_eq) / (eta exp(-1.5 T)), no damage at T <= -1/3, T from the Cauchy
+stress at the end of each increment with szz = 0 (docs/fracture.md). The first point whose
+damage reaches 1 marks fracture initiation; with a ``characteristic_length`` l* in the specimen
+(the nonlocal criterion), the first point where the damage averaged over l* reaches 1 and its
+own damage too (pmpm's criterion: exceeded at the point and over l*): a Gaussian weight of
+variance l*^2 / 12 per axis (that of a uniform average over a segment of length l*) on the Gauss
+points' current positions, cut at 3 standard deviations, weighted by the points' areas and
+renormalised over the material within reach (neighbour lists built once on the initial points,
+1.5 times wider than the cut), evaluated each step once some point's own damage has reached 1
+(the average cannot exceed the largest value). ``snapshots`` records the Gauss points'
+positions, eps_p_eq, damage and stresses at given times (the diagnosis of docs/fracture.md).
 
 This model shares no code with pmpm (it imports nothing from it):
 
@@ -52,7 +52,7 @@ __all__ = ["SPECIMEN", "mesh", "run", "polygon"]
 SPECIMEN = {
     "length": 0.1, "width": 0.04, "thickness": 0.01, "radius": 0.008, "pull": 2.0,
     "E": 200e9, "nu": 0.3, "density": 7850.0, "yield_stress": 355e6, "hardening": 0.01,
-    "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 4.0e-3,
+    "eta": 0.3, "fracture_energy": 2.0e4, "characteristic_length": 6.0e-3,
 }
 
 
@@ -334,7 +334,8 @@ def _march(x, v, mass, elems, held, pulled, pull, dt, end_time, sample, thicknes
                             wj = gw[j] * math.exp(-0.5 * d2 / (sigma * sigma))
                             num += wj * damage[j // 4, j % 4]
                             den += wj
-                    if den > 0.0 and num >= den:
+                    # and the point's own index (pmpm's fail_where: exceeded at the point and over l*)
+                    if den > 0.0 and num >= den and damage[i // 4, i % 4] >= 1.0:
                         failed_now = True
                         wx, wy = gx[i, 0], gx[i, 1]
                         break

@@ -21,10 +21,10 @@ Damage (docs/fracture.md has the sources and the choice of model)
     strain reaches the locus, which is also the stress-modified critical strain criterion.
 Nonlocal criterion (``characteristic_length`` l*)
     The increments above accumulate the point's own index (field ``vgm_index``), and the point
-    fails when the index averaged over l* reaches 1 (:func:`fail_where`, called by the effect
-    pmpm.physics.fracture_nonlocal, which computes the average on the grid); ``damage`` then
-    holds the average. Without l* the index is ``damage`` itself and a point fails where it
-    reaches 1.
+    fails when the index averaged over l* and its own index have both reached 1
+    (:func:`fail_where`, called by the effect pmpm.physics.fracture_nonlocal, which computes the
+    average on the grid); ``damage`` then holds the smaller of the two. Without l* the index is
+    ``damage`` itself and a point fails where it reaches 1.
 Failure (D = 1) and the release of its tension
     From then the material's own update advances an *effective* stress (field
     ``effective_stress``), and the stress the point transmits is its compressive principal
@@ -354,20 +354,24 @@ def epilogue(phase, old, eq0, work0, stress, de, eps_eq, work, eff, crack, damag
 
 
 @nb.njit(cache=True)
-def fail_where(average, mat_ids, which, stress, eff, crack, damage, fp):
+def fail_where(average, index, mat_ids, which, stress, eff, crack, damage, fp):
     """The nonlocal criterion's decision: each intact point of the material (``which``; -1:
-    every point) takes the nonlocal average of the void growth index as its damage and fails
-    where it reaches 1 (pmpm.physics.fracture_nonlocal computes the average). Returns the
-    count of points that failed."""
+    every point) fails where both its own void growth index (``index``) and the index's nonlocal
+    average over l* (``average``, computed by pmpm.physics.fracture_nonlocal) have reached 1: the
+    criterion exceeded at the point and over l* around it (Kanvinde and Deierlein's condition).
+    The average alone would also fail the points beside a crack whose own index is below 1 (the
+    average spreads the crack path's index over l*): the failed band would widen with l* / h
+    and dissipate more than G_f per unit crack area (docs/fracture.md). An intact point's damage
+    is the smaller of the two. Returns the count of points that failed."""
     count = 0
     for p in range(stress.shape[0]):
         if (which >= 0 and mat_ids[p] != which) or damage[p] >= 1.0:
             continue
-        if average[p] >= 1.0:
+        if average[p] >= 1.0 and index[p] >= 1.0:
             _fail(p, stress, eff, crack, damage, fp)
             count += 1
         else:
-            damage[p] = max(average[p], 0.0)
+            damage[p] = max(min(average[p], index[p]), 0.0)
     return count
 
 
