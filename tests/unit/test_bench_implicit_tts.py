@@ -114,8 +114,8 @@ def test_explicit_twin_starts_from_the_static_equilibrium():
     times the stresses' nodal forces, largest at the bodies' edges), so the MEDIAN speed is
     bounded, by a tenth of free fall: the requirement that the twin start at rest to within a
     tenth of the oscillation gravity switched on at t = 0 would cause (measured 2026-12-07:
-    0.0135 of g dt at 0.2 m cells). The run without adopt_state is the unloaded start below:
-    its 1.0 fails that bound (no planted bug was run beside it)."""
+    0.0135 of g dt at 0.2 m cells). Shown to fail (2026-12-07) with adopt_state's line that
+    installs the fields replaced by ``pass``: 1.0 (free fall) against the bound 0.1."""
     from pmpm.benchmarks.implicit_frame import adopt_state, explicit_twin, frame3_scene, static_start, undamped
     from pmpm.build import build_solver
     scene = undamped(frame3_scene(0.2, "northridge_implicit", ppc=3, time_step=5e-3, end_time=5e-3))
