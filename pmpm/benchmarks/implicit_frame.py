@@ -5,18 +5,28 @@ run that records the left joints' drifts (floors 2, 3 and the roof) relative to 
 What ``pmpm bench implicit --scenes frame3-step frame3-record`` (pmpm.benchmarks.implicit_tts)
 and studies/northridge_implicit.py both need lives here: studies sit outside the package, and
 the benchmark may not import them.
+
+The explicit twin of a scene whose implicit run brings gravity to equilibrium statically first
+(``initial_static``) starts from that equilibrium: the explicit integrator has no static stage,
+and gravity switched on at t = 0 makes the frame oscillate about its sagged shape (undamped, for
+the whole run) with a sway at the left joints that is not the record's. static_start runs the
+implicit scene's static stage (the record left out) and adopt_state hands its particle state to
+the explicit solver before its first step: both integrators then start from the same state.
 """
 import dataclasses
 import time
 
 import numpy as np
 
+from decomposition import alltoallv_fields
 from pmpm.benchmarks.args import FRAME3_CASE
 from pmpm.build import build_solver
 from pmpm.io.tracking import Tracker
 from pmpm.scene.config import apply_overrides, parse_scene, read_toml
 
-__all__ = ["JOINTS", "frame3_scene", "strip_explicit_only", "explicit_twin", "drift_history"]
+__all__ = ["JOINTS", "frame3_scene", "strip_explicit_only", "undamped", "explicit_twin", "static_stage",
+           "static_start",
+           "adopt_state", "drift_history"]
 
 #: the tracked left joints of floors 2, 3 and the roof (the case's frame node names)
 JOINTS = ("c0_f1", "c0_f2", "c0_f3")
@@ -64,6 +74,14 @@ def strip_explicit_only(scene):
     return dataclasses.replace(scene, boundaries=boundary, output=output)
 
 
+def undamped(scene):
+    """``scene`` without its Rayleigh damping. The explicit twin of the frame under the record
+    needs it: the stiffness-proportional viscous stress bounds the explicit step (7.1e-7 s at
+    0.1 m cells for the northridge_implicit variant's 2 %, 4.3 million steps for 3 s) where the
+    CFL step is 1.7e-5 s."""
+    return dataclasses.replace(scene, loads=dataclasses.replace(scene.loads, rayleigh=None))
+
+
 def explicit_twin(scene, end_time=None, cfl=None):
     """``scene`` under the explicit integrator (MUSL at the CFL number ``cfl``, default the
     scene's), to ``end_time`` (default the scene's). The same loads: a static stage of the
@@ -76,16 +94,65 @@ def explicit_twin(scene, end_time=None, cfl=None):
     return dataclasses.replace(scene, solver=solver)
 
 
-def drift_history(scene, comm, joints=JOINTS, interval=0.0, progress=None):
+def static_stage(scene):
+    """Whether ``scene``'s run brings its loads to equilibrium statically before its dynamics."""
+    return scene.solver.integrator == "implicit" and bool(scene.solver.implicit.get("initial_static"))
+
+
+def static_start(scene, comm):
+    """The particle state (this rank's fields) of ``scene``'s implicit run after its static
+    stage (``solver.implicit.initial_static``: the loads at t = 0 brought to equilibrium), or
+    None when the scene has no static stage. Runs the scene without its ground motion for one
+    implicit step: the static stage, then a step under the same constant loads in which nothing
+    moves (a_0 = 0 after the stage, pmpm.core.implicit.scheme; the record's first step would
+    move the supports). Time stays out of any figure: it is the explicit twin's start."""
+    if not static_stage(scene):
+        return None
+    solver = dataclasses.replace(scene.solver, end_time=scene.solver.time_step)
+    quiet = dataclasses.replace(scene, solver=solver, loads=dataclasses.replace(scene.loads, ground_motion=None))
+    s = build_solver(quiet, comm)
+    s.step()
+    return dict(s.particles.fields)
+
+
+def adopt_state(s, fields, comm):
+    """Give the solver ``s`` (not yet stepped) the particle state ``fields`` (each rank's rows,
+    from a solver of the same scene: the same particles and ids), as a restart does
+    (pmpm.runner.Run._restore): the fields ``s`` carries, sent to the ranks owning their
+    columns; the step and the energy balance from that state. Fields the other run carried
+    and ``s`` does not (the implicit integrator's particle accelerations) are dropped."""
+    wanted = s.particles.spec()
+    missing = sorted(set(wanted) - set(fields))
+    if missing:
+        raise ValueError(f"the start state has no particle field {missing[0]!r}")
+    rows = {k: np.ascontiguousarray(fields[k], dtype=wanted[k][1]) for k in wanted}
+    cols = np.floor((rows["x"][:, s.axis] - s.grid.origin[s.axis]) * s.grid.inv_h).astype(np.int64)
+    s.particles.fields = alltoallv_fields(comm, rows, s.decomp.owner_of_columns(cols))
+    s.vmax = s.decomp.allreduce_max(s._local_speed())
+    s.dt = s.stable_dt(s.vmax)
+    s._vmax_healthy = s.vmax
+    # the energy balance from the adopted state: its stored strain energy is the run's initial
+    # energy, counted as the internal work that made it (this rank's share). Left at zero, the
+    # prestress's work on the small motions that follow (negative as often as not) makes the
+    # "initial energy plus external work" negative and the divergence check's kinetic-energy
+    # test fires at once (it did, at t = 0.056 s of the record's twin)
+    s.internal_work = float(s.local_energies()[1])
+    s.initial_energy = s.energies()["total"]
+
+
+def drift_history(scene, comm, joints=JOINTS, interval=0.0, progress=None, start=None):
     """Run ``scene`` to its end on ``comm``, recording the ux of the tracked points ``joints``
     minus the ground's displacement (the absolute formulation's supports move with the record,
     pmpm.physics.groundmotion) and minus their value before the first step, at the first step
     at or after each multiple of ``interval`` (0: every step).
 
-    Returns a dict: ``t`` (n,), ``drift`` (n, len(joints)), ``wall_s`` (rank 0's), ``cpu_s``
+    Returns a dict: ``t`` (n,), ``drift`` (n, len(joints)) (from the first step on when the run
+    has a static stage, static_stage), ``wall_s`` (rank 0's), ``cpu_s``
     (time.process_time of the run summed over the ranks), ``cpu_s_rank0``, ``steps`` and the
     scheme's ``stats`` (the implicit integrator's Newton counts; empty for the explicit one).
-    ``progress``: a callable(t, steps, wall) called on rank 0 about a hundred times."""
+    ``progress``: a callable(t, steps, wall) called on rank 0 about a hundred times. ``start``:
+    particle fields to start from (static_start; adopt_state), the drifts still measured from
+    the particles' positions before it (those of the implicit run's first sample)."""
     s = build_solver(scene, comm)
     names = [t.name for t in scene.output.track]
     missing = [j for j in joints if j not in names]
@@ -101,7 +168,11 @@ def drift_history(scene, comm, joints=JOINTS, interval=0.0, progress=None):
         return ux - (ground.displacement(s.t) if ground is not None else 0.0)
 
     x0 = sample()
-    t, drift = [0.0], [np.zeros(len(joints))]
+    if start is not None:
+        adopt_state(s, start, comm)
+    # an implicit run's state at t = 0 is its static stage's equilibrium, which its first step
+    # computes: its history starts at that step (its first sample would be the unloaded frame)
+    t, drift = ([], []) if static_stage(scene) else ([0.0], [sample() - x0])
     end = scene.solver.end_time
     next_sample, next_shown = interval, 0.0
     comm.Barrier()
