@@ -416,7 +416,7 @@ class Solver:
         # the second half in the updates' own passes where every material sums it there (each
         # pass sums the particles it updates: together all of them)
         summed = not thickness and all(material.sums_power for material, _ in self._stress_passes)
-        after = 0.0
+        power_after = 0.0
         for material, which in self._stress_passes:
             if thickness and not material.needs_deformation_gradient:
                 trace_before = self._scratch("_trace_buf", (p.n,))
@@ -425,7 +425,7 @@ class Solver:
             if material.needs_deformation_gradient:
                 state["F"] = p["F"]
             if summed:
-                after += material.update_stress_power(p["stress"], self._de, p["vol"], state, p["mat"], which)
+                power_after += material.update_stress_power(p["stress"], self._de, p["vol"], state, p["mat"], which)
             else:
                 material.update_stress(p["stress"], self._de, state, p["mat"], which)
             if thickness and not material.needs_deformation_gradient:
@@ -433,8 +433,8 @@ class Solver:
                 K.advance_thickness_stretch(p["F"], self._de, p["stress"], trace_before,
                                             material.E, material.nu, p["mat"], which)
         if not summed:
-            after = K.stress_power(p["stress"], self._de, p["vol"])
-        self.internal_work += 0.5 * after
+            power_after = K.stress_power(p["stress"], self._de, p["vol"])
+        self.internal_work += 0.5 * power_after
         for after in self._hooks["after_stress_update"]:   # viscous stress, fading bodies
             after(self)
 
