@@ -22,7 +22,8 @@ CHANGEABLE_ON_RESTART = (
     # run whose Newton iterations failed continues with other tolerances, iterations or solvers
     "solver.implicit.residual_tolerance", "solver.implicit.energy_tolerance",
     "solver.implicit.max_iterations", "solver.implicit.newton", "solver.implicit.line_search",
-    "solver.implicit.max_halvings", "solver.petsc",
+    "solver.implicit.max_halvings", "solver.implicit.krylov_tolerance", "solver.implicit.krylov_iterations",
+    "solver.petsc",
     "output.directory", "output.interval", "output.history_interval",
     "output.checkpoint_interval", "output.progress_interval", "output.deformed_plot",
     "output.hysteresis",

@@ -12,6 +12,8 @@ import sys
 
 import pytest
 
+from pmpm.scene.fingerprint import first_difference
+
 BASE = """\
 [grid]
 cell_size = 0.5
@@ -199,3 +201,14 @@ def test_newton_failure_at_the_smallest_step_stops_with_exit_3(tmp_path):
     assert proc.returncode == 3, (proc.returncode, proc.stderr[-2000:])
     assert "Newton's method did not converge" in proc.stderr
     assert "solver.implicit.max_halvings = 0" in proc.stderr
+
+
+def test_the_krylov_controls_may_change_on_restart_like_newton():
+    """A run restarted from its last good state may switch ``newton`` (and so to "krylov"): the
+    krylov mode's own controls must be changeable too, or the switch is refused as another
+    scene. The answer they converge to is the same (to the tolerances)."""
+    ours = {"solver.implicit.newton": "krylov", "solver.implicit.krylov_tolerance": 1e-6,
+            "solver.implicit.krylov_iterations": 20, "solver.end_time": 1.0, "grid.cell_size": 0.1}
+    theirs = {"solver.implicit.newton": "modified", "grid.cell_size": 0.1}
+    assert first_difference(ours, theirs) is None
+    assert first_difference(ours, dict(theirs, **{"grid.cell_size": 0.05})) == "grid.cell_size"
