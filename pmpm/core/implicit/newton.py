@@ -42,6 +42,8 @@ with full steps).
 import logging
 import math
 
+from pmpm.core.implicit.accelerated import REFRESH_AFTER, STALL_RATE, AndersonMixer
+
 __all__ = ["NewtonFailed", "newton"]
 logger = logging.getLogger(__name__)
 
@@ -83,7 +85,12 @@ def newton(problem, u, opts, history=None):
     energy0 = None
     # "krylov" assembles the tangent where "modified" would refactor it (the linear solver then
     # solves it on its kept factorisation: pmpm.core.implicit.kept_factorisation)
-    modified = opts.get("newton", "full") in ("modified", "krylov")
+    variant = opts.get("newton", "full")
+    modified = variant in ("modified", "krylov", "accelerated")
+    # "accelerated": the modified corrections mixed in the subspace of the step's earlier ones
+    # (pmpm.core.implicit.accelerated), a tangent only where that stalls
+    mixer = AndersonMixer(problem.s.decomp.allreduce_sum) if variant == "accelerated" else None
+    on_factorisation = 0      # iterations of this step on the current factorisation ("accelerated")
     refactor = not (modified and problem.factorisation_fits())
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):
@@ -103,6 +110,9 @@ def newton(problem, u, opts, history=None):
             break
         if refactor or not modified:
             problem.tangent(u)
+            on_factorisation = 0
+            if mixer is not None:
+                mixer.clear()
         du = problem.solve(r)
         energy = abs(problem.dot(du, r))
         if energy0 is None:
@@ -113,8 +123,14 @@ def newton(problem, u, opts, history=None):
         if history is not None and not (norm <= opts["residual_tolerance"] * scale and k > 0):
             history.append((norm, energy))
         previous = norm
+        if mixer is not None:
+            du = mixer.correction(du)
         r, norm = _step(problem, u, du, r, norm, opts["line_search"])
-        refactor = norm > REFACTOR_RATE * previous
+        on_factorisation += 1
+        if mixer is None:
+            refactor = norm > REFACTOR_RATE * previous
+        else:
+            refactor = norm > STALL_RATE * previous or on_factorisation >= REFRESH_AFTER
     raise NewtonFailed(f"no convergence in {opts['max_iterations']} iterations (residual {norm:.3g}, "
                        f"{norm / scale:.3g} of the force scale)")
 

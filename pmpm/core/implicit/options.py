@@ -12,6 +12,9 @@
     newton = "full"                # | "modified": refactor the tangent only where the rate is slow
                                    # | "krylov": as "modified", each new tangent solved by GMRES
                                    # on a kept factorisation, refactored when the GMRES stalls
+                                   # | "accelerated": as "modified", its corrections mixed in the
+                                   # subspace of the step's earlier ones (Anderson; OpenSees'
+                                   # KrylovNewton), a tangent only where that stalls
     krylov_tolerance = 1e-6        # "krylov": the GMRES's relative residual tolerance
     krylov_iterations = 10         # "krylov": GMRES iterations before the factorisation is renewed
     line_search = false            # halve the step while the energy slope grows (Crisfield)
@@ -50,7 +53,7 @@ __all__ = ["read_integrator", "INTEGRATORS", "ANALYSES", "IMPLICIT_DEFAULTS", "r
 INTEGRATORS = ("explicit", "implicit")
 ANALYSES = ("dynamic", "static")
 #: tangent updates of Newton's iterations (pmpm.core.implicit.newton)
-NEWTON_VARIANTS = ("full", "modified", "krylov")
+NEWTON_VARIANTS = ("full", "modified", "krylov", "accelerated")
 #: the keys of newton = "krylov" alone (refused with the other variants: they would do nothing)
 KRYLOV_KEYS = ("krylov_tolerance", "krylov_iterations")
 #: the registry name of the implicit scheme (pmpm.core.schemes)
