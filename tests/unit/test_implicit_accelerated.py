@@ -119,3 +119,35 @@ def test_accelerated_newton_reaches_the_same_equilibrium_with_fewer_tangents():
     tip = lambda s: float(s.particles["x"][np.argmax(s.particles["x"][:, 0]), 1])   # noqa: E731
     assert abs(tip(acc) - tip(full)) <= 1e-6 * abs(timoshenko_tip_deflection(981.0))
     assert acc.scheme.stats["tangents"] < mod.scheme.stats["tangents"], (acc.scheme.stats, mod.scheme.stats)
+
+
+def test_diagonal_entries_are_the_assembled_centre_blocks():
+    """pmpm/core/implicit/diagonal.py against its twin, the diagonal of the centre blocks of
+    kernels.assemble_blocks, for particles with a general deformation, stress and tangent
+    (unsymmetric D). Fails with the initial-stress term left out, or with B's shear row of
+    the y component taken as the x one's."""
+    from pmpm.core.implicit import kernels as IK
+    from pmpm.core.implicit.diagonal import diagonal_entries
+    from pmpm.core.shape import SHAPE_TAGS
+    rng = np.random.default_rng(3)
+    tag = SHAPE_TAGS["cubic"]
+    K = len(tag)
+    ncx, ncy, inv_h = 12, 10, 4.0
+    origin = np.array([0.0, 0.0])
+    n = 40
+    x = np.column_stack([rng.uniform(0.8, 2.2, n), rng.uniform(0.8, 1.7, n)])
+    vol = rng.uniform(0.5, 1.5, n) * 1e-3
+    S = rng.standard_normal((n, 3)) * 1e8
+    f = np.tile([1.0, 0.0, 0.0, 1.0], (n, 1)) + 0.05 * rng.standard_normal((n, 4))
+    D = rng.standard_normal((n, 3, 3)) * 1e11
+    shape = (ncx + 1, ncy + 1)
+    lid = np.arange(shape[0] * shape[1]).reshape(shape)
+    span = 2 * K - 1
+    Kb = np.zeros((lid.size, span * span, 2, 2))
+    IK.assemble_blocks(x, vol, S, f, D, lid, Kb, 0, 0, origin, inv_h, ncx, ncy, tag)
+    out = np.zeros(shape + (2,))
+    diagonal_entries(x, vol, S, f, D, out, 0, 0, origin, inv_h, ncx, ncy, tag)
+    centre = (span * span) // 2
+    ref = np.stack([Kb[:, centre, 0, 0], Kb[:, centre, 1, 1]], axis=1).reshape(shape + (2,))
+    assert np.abs(ref).max() > 0.0
+    assert np.allclose(out, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())

@@ -103,6 +103,21 @@ class KeptFactorisation:
         ya[:] = xa * self.inv_diag
         ya[self.new_rows] = self.z.array_r[self.old_rows]
 
+    def solve_array(self, xa):
+        """P^-1 xa on the shared rows, a Jacobi step on the new ones, as ``apply`` but on the
+        owned rows' numpy array (``newton = "accelerated"``: the kept factorisation is the
+        solver itself, no Krylov iteration around it). Collective."""
+        if self.identity:
+            self.b.array[:] = xa
+            self.ksp.solve(self.b, self.z)
+            return self.z.array_r.copy()
+        self.b.array[:] = 0.0
+        self.b.array[self.old_rows] = xa[self.new_rows]
+        self.ksp.solve(self.b, self.z)
+        ya = xa * self.inv_diag
+        ya[self.new_rows] = self.z.array_r[self.old_rows]
+        return ya
+
     def release(self):
         """Destroy P and its solver (not ``destroy``: PETSc calls a python PC context's
         ``destroy(pc)`` when the PC goes)."""

@@ -166,7 +166,8 @@ class LinearSolver:
         #: factorisations (direct solves: one for each operator; ``krylov``: of the kept one)
         self.factorisations = 0
         self.krylov = krylov
-        self.kept = KeptFactorisation(self.PETSc, comm, PREFIX) if krylov is not None else None
+        self.kept_only = kept_only
+        self.kept = KeptFactorisation(self.PETSc, comm, PREFIX) if krylov is not None or kept_only else None
         if self.kept is not None:
             # the python preconditioner's objects go before PETSc finalises (petsc4py's own
             # exit handler, registered earlier, runs later): destroyed after it, at garbage
@@ -215,6 +216,10 @@ class LinearSolver:
         if self.kept is None:
             self.factorisations += 1
             return
+        if self.kept_only:
+            self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
+            self._factor_kept()
+            return
         self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
         d = self.A.getDiagonal()   # (collective: on every rank, whether its rows changed or not)
         self.kept.fit(self._keys, d.array.copy())
@@ -258,6 +263,9 @@ class LinearSolver:
         if self.A is not None:
             self.A.destroy()
         self.A = A
+        if self.kept_only:   # (no solver of its own: the kept factorisation's)
+            self._sizes = A.getSizes()
+            return
         if self.kept is not None:
             self._krylov_solver(A)
             return
@@ -297,9 +305,21 @@ class LinearSolver:
         self._sizes = A.getSizes()
         self.x, self.b = A.createVecs()
 
+    def refit(self, keys, diagonal):
+        """``kept_only``: this step's owned rows, named ``keys`` (``diagonal``: their diagonal,
+        for the rows the kept factorisation does not have; may be None where the keys are
+        its rows), mapped onto the kept factorisation. Rank-local."""
+        self._keys = np.asarray(keys)
+        self.kept.fit(self._keys, diagonal)
+
     def solve(self, rhs):
         """The owned part of A^-1 rhs (``rhs``: this rank's owned rows). Raises
         ``ArithmeticError`` when the Krylov solver reports divergence."""
+        if self.kept_only:
+            self.iterations += 1
+            # (a correction that is not finite shows in the next residual's global norm, on
+            # every rank: Newton stops there; no rank-local test that would leave the others)
+            return self.kept.solve_array(np.asarray(rhs, dtype=float))
         self.b.array[:] = rhs
         if self.kept is not None and (not self.kept.ready or self._refactor_next):
             self._factor_kept()

@@ -92,6 +92,11 @@ def newton(problem, u, opts, history=None):
     mixer = AndersonMixer(problem.s.decomp.allreduce_sum) if variant == "accelerated" else None
     on_factorisation = 0      # iterations of this step on the current factorisation ("accelerated")
     refactor = not (modified and problem.factorisation_fits())
+    if refactor and mixer is not None and problem.linear.kept.ready:
+        # other unknowns than the kept factorisation's (particles crossed cells): its rows
+        # matched by grid node, a Jacobi step on the new ones, instead of a new tangent
+        problem.fit_kept_factorisation(u)
+        refactor = False
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):
             raise NewtonFailed(f"residual not finite at iteration {k}")

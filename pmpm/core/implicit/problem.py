@@ -16,6 +16,7 @@ import logging
 import numpy as np
 
 from pmpm.core.implicit import kernels as IK
+from pmpm.core.implicit.diagonal import diagonal_entries
 from pmpm.core.implicit.dofs import StepDofs, blocks_to_csr
 
 __all__ = ["GridProblem"]
@@ -95,6 +96,7 @@ class GridProblem:
         self.free = ~self.dofs.held[self.dofs.owned_active].reshape(-1)
         self.evaluations = 0
         self.tangents = 0
+        self.refits = 0         # steps mapped onto a kept factorisation ("accelerated")
         self._evaluated = None
         self.force_scale = 0.0
         # the effects' terms (pmpm.core.implicit.terms): their forces at the step's start
@@ -202,6 +204,34 @@ class GridProblem:
         same = key is not None and key[0].shape == self.dofs.active.shape and \
             np.array_equal(key[0], self.dofs.active) and np.array_equal(key[1], self.dofs.held)
         return self.s.decomp.allreduce_sum(0 if same else 1) == 0
+
+    def fit_kept_factorisation(self, u):
+        """``newton = "accelerated"``: this step's rows mapped onto the kept factorisation of
+        an earlier tangent instead of a new one (rows matched by grid node; the rows it does
+        not have get a Jacobi step on the diagonal of the tangent at ``u``: the material's
+        and initial-stress part from pmpm.core.implicit.diagonal, halo-summed, plus the mass
+        term; the effects' terms, Rayleigh's a few tens of per cent of the stiffness, are
+        left out of this preconditioner). Collective: the diagonal is computed on every rank
+        when some rank has rows the factorisation lacks."""
+        keys = self._row_keys()
+        kept = self.linear.kept
+        same = kept.keys is not None and keys.shape == kept.keys.shape and np.array_equal(keys, kept.keys)
+        diagonal = None
+        if self.s.decomp.allreduce_sum(0 if same else 1):
+            self.evaluate(u)
+            p = self.s.particles
+            several = len(self.s.materials) > 1
+            for k, m in enumerate(self.s.materials):
+                m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
+                          k if several else -1)
+            W = np.zeros(self.mass.shape + (2,))
+            diagonal_entries(self.x, self.vol, self.S, self.f, self.D, W, *self.geometry)
+            self.s.decomp.sum_halo(W)
+            if self.rule is not None:
+                W += (self.rule.mass_factor * self.mass)[..., None]
+            diagonal = self.dofs.owned_values(W)
+        self.linear.refit(keys, diagonal)
+        self.refits += 1
 
     def _diagonal(self, Kb):
         """What the owned nodes' diagonals receive: the mass term m / (beta dt^2), and on a held

@@ -157,7 +157,7 @@ class ImplicitNewmark:
         krylov = None
         if self.options.get("newton") == "krylov":
             krylov = (self.options["krylov_tolerance"], self.options["krylov_iterations"])
-        self.linear = LinearSolver(s.comm, self.petsc, krylov)
+        self.linear = LinearSolver(s.comm, self.petsc, krylov, kept_only=self.options.get("newton") == "accelerated")
         # what the effects add to the step (pmpm.core.implicit.terms)
         self.terms = [t for t in (e.implicit_term(s) for e in s.effects) if t is not None]
         if ACCELERATION not in s.particles.fields:
@@ -290,8 +290,10 @@ class ImplicitNewmark:
             self.stats["tangents"] += problem.tangents
             self.stats["factorisations"] = self.linear.factorisations
             self.stats["linear_iterations"] = self.linear.iterations
-            if self.linear.kept is not None:   # newton = "krylov": tangents whose unknowns had changed
+            if self.linear.kept is not None and not self.linear.kept_only:   # newton = "krylov": tangents whose unknowns had changed
                 self.stats["remapped_tangents"] = self.linear.remapped
+            if self.linear.kept_only:   # newton = "accelerated": steps mapped onto the kept factorisation
+                self.stats["refits"] = self.stats.get("refits", 0) + problem.refits
         if not self.options_checked and self.linear.ksp is not None:   # after the first solve
             self.linear.check_unused()
             self.options_checked = True
