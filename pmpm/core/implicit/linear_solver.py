@@ -142,9 +142,15 @@ class LinearSolver:
         solver: pmpm.core.implicit.kept_factorisation), refactored from the current operator
         when the GMRES does not converge within the iterations. None: the options' solver on
         each operator (by default a new LU factorisation of each).
+    kept_only : bool
+        ``newton = "accelerated"``: each operator is factored when it is set, and the solves
+        between two operators apply that factorisation alone, also to a later step's rows
+        (``refit``: rows matched by grid node, a Jacobi step on new ones;
+        pmpm.core.implicit.kept_factorisation). Newton's accelerated iteration makes up for
+        the difference from the current tangent (pmpm.core.implicit.accelerated).
     """
 
-    def __init__(self, comm, options, krylov=None):
+    def __init__(self, comm, options, krylov=None, kept_only=False):
         self.PETSc = petsc()
         self.comm = comm
         self.options = dict(DEFAULT_OPTIONS)
@@ -167,6 +173,9 @@ class LinearSolver:
         self.factorisations = 0
         self.krylov = krylov
         self.kept_only = kept_only
+        #: ``kept_only``: the diagonal (owned rows) of the kind GridProblem.kept_diagonal computes,
+        #: of the operator set next (the kept factorisation's rescaling)
+        self.reference_diagonal = None
         self.kept = KeptFactorisation(self.PETSc, comm, PREFIX) if krylov is not None or kept_only else None
         if self.kept is not None:
             # the python preconditioner's objects go before PETSc finalises (petsc4py's own
@@ -218,7 +227,7 @@ class LinearSolver:
             return
         if self.kept_only:
             self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
-            self._factor_kept()
+            self._factor_kept(self.reference_diagonal)
             return
         self._keys = np.arange(2 * start, 2 * (start + n_owned)) if keys is None else np.asarray(keys)
         d = self.A.getDiagonal()   # (collective: on every rank, whether its rows changed or not)
@@ -347,10 +356,10 @@ class LinearSolver:
             self._refactor_next = self._extra >= self.krylov[1]
         return self.x.array.copy()
 
-    def _factor_kept(self):
+    def _factor_kept(self, reference_diagonal=None):
         self._refactor_next = False
         self._extra = 0
-        self.kept.factor(self.A, self._keys)
+        self.kept.factor(self.A, self._keys, reference_diagonal)
         self.factorisations += 1
 
     def destroy(self):

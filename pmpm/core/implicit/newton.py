@@ -92,11 +92,10 @@ def newton(problem, u, opts, history=None):
     mixer = AndersonMixer(problem.s.decomp.allreduce_sum) if variant == "accelerated" else None
     on_factorisation = 0      # iterations of this step on the current factorisation ("accelerated")
     refactor = not (modified and problem.factorisation_fits())
-    if refactor and mixer is not None and problem.linear.kept.ready:
-        # other unknowns than the kept factorisation's (particles crossed cells): its rows
-        # matched by grid node, a Jacobi step on the new ones, instead of a new tangent
-        problem.fit_kept_factorisation(u)
-        refactor = False
+    if mixer is not None and problem.linear.kept.ready:
+        # the kept factorisation of an earlier step, rescaled to the current diagonal, where
+        # its rows are this step's (else a new tangent)
+        refactor = not problem.fit_kept_factorisation(u)
     for k in range(opts["max_iterations"] + 1):
         if not math.isfinite(norm):
             raise NewtonFailed(f"residual not finite at iteration {k}")
@@ -135,7 +134,9 @@ def newton(problem, u, opts, history=None):
         if mixer is None:
             refactor = norm > REFACTOR_RATE * previous
         else:
-            refactor = norm > STALL_RATE * previous or on_factorisation >= REFRESH_AFTER
+            # (the first correction on a kept factorisation is the plain modified one, without
+            # the subspace: judged from the second on)
+            refactor = (on_factorisation >= 2 and norm > STALL_RATE * previous) or on_factorisation >= REFRESH_AFTER
     raise NewtonFailed(f"no convergence in {opts['max_iterations']} iterations (residual {norm:.3g}, "
                        f"{norm / scale:.3g} of the force scale)")
 

@@ -170,6 +170,8 @@ class GridProblem:
         span = d.span
         Kb = np.zeros((d.n_local, span * span, 2, 2))
         IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, d.lid, Kb, *self.geometry)
+        if self.linear.kept_only:   # (before the terms: the diagonal of kept_diagonal's kind)
+            self.linear.reference_diagonal = self._diagonal_of_D()
         for term in self.terms:
             term.add_tangent(self, u, Kb)
         if self.alpha:
@@ -205,33 +207,48 @@ class GridProblem:
             np.array_equal(key[0], self.dofs.active) and np.array_equal(key[1], self.dofs.held)
         return self.s.decomp.allreduce_sum(0 if same else 1) == 0
 
+    def kept_diagonal(self, u):
+        """The owned rows' diagonal of the tangent at ``u`` as ``newton = "accelerated"``
+        compares it from step to step: the material's and initial-stress part
+        (pmpm.core.implicit.diagonal) halo-summed, plus the mass term; the effects' terms are
+        left out (the same at the factorisation and later, so the ratio is like for like).
+        Collective. Leaves the materials' tangents in ``self.D``."""
+        self.evaluate(u)
+        p = self.s.particles
+        several = len(self.s.materials) > 1
+        for k, m in enumerate(self.s.materials):
+            m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
+                      k if several else -1)
+        return self._diagonal_of_D()
+
+    def _diagonal_of_D(self):
+        """kept_diagonal's sum with the materials' tangents already in ``self.D``."""
+        W = np.zeros(self.mass.shape + (2,))
+        diagonal_entries(self.x, self.vol, self.S, self.f, self.D, W, *self.geometry)
+        self.s.decomp.sum_halo(W)
+        if self.rule is not None:
+            W += (self.rule.mass_factor * self.mass)[..., None]
+        return self.dofs.owned_values(W)
+
     def fit_kept_factorisation(self, u):
-        """``newton = "accelerated"``: this step's rows mapped onto the kept factorisation of
-        an earlier tangent instead of a new one (rows matched by grid node; the rows it does
-        not have get a Jacobi step on the diagonal of the tangent at ``u``: the material's
-        and initial-stress part from pmpm.core.implicit.diagonal, halo-summed, plus the mass
-        term; the effects' terms, Rayleigh's a few tens of per cent of the stiffness, are
-        left out of this preconditioner). Collective: the diagonal is computed on every rank
-        when some rank has rows the factorisation lacks."""
+        """``newton = "accelerated"``: whether this step can start on the kept factorisation
+        of an earlier tangent. Only where its rows are this step's on every rank (collective):
+        it is then rescaled so that its diagonal is the current one
+        (pmpm.core.implicit.kept_factorisation) and the step assembles no tangent unless the
+        accelerated iteration stalls. Where rows changed (particles crossed cells), a row that
+        left P cannot be dropped from it: in P that node is free, and a node reached by the
+        tail of one particle's spline relaxes that particle's strain (a near-mechanism of
+        P that the current system does not have: on the three-storey frame the first
+        correction then raised the residual three- to tenfold, docs/implicit.md); so the step
+        refactors, as ``"modified"`` does."""
         keys = self._row_keys()
         kept = self.linear.kept
         same = kept.keys is not None and keys.shape == kept.keys.shape and np.array_equal(keys, kept.keys)
-        diagonal = None
         if self.s.decomp.allreduce_sum(0 if same else 1):
-            self.evaluate(u)
-            p = self.s.particles
-            several = len(self.s.materials) > 1
-            for k, m in enumerate(self.s.materials):
-                m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
-                          k if several else -1)
-            W = np.zeros(self.mass.shape + (2,))
-            diagonal_entries(self.x, self.vol, self.S, self.f, self.D, W, *self.geometry)
-            self.s.decomp.sum_halo(W)
-            if self.rule is not None:
-                W += (self.rule.mass_factor * self.mass)[..., None]
-            diagonal = self.dofs.owned_values(W)
-        self.linear.refit(keys, diagonal)
+            return False
+        self.linear.refit(keys, self.kept_diagonal(u))
         self.refits += 1
+        return True
 
     def _diagonal(self, Kb):
         """What the owned nodes' diagonals receive: the mass term m / (beta dt^2), and on a held
