@@ -101,3 +101,29 @@ def test_same_unknowns_new_values(scale):
     assert np.abs(x - ref).max() <= 1e-8 * np.abs(ref).max()
     assert lin.factorisations == 1
     lin.destroy()
+
+
+def test_kept_only_rescaled_to_the_current_diagonal_is_exact_for_a_diagonal_change():
+    """newton = "accelerated": the kept factorisation applied as S P^-1 S with S = sqrt(d_P / d)
+    (kept_factorisation._diagonal_scale). Where the current operator is P rescaled on both
+    sides, A = T P T with T diagonal (a node whose weight changed), its diagonal is T^2 d_P,
+    so S = T^-1 and S P^-1 S = A^-1 exactly: the solve equals a dense solve of A to round-off,
+    where P^-1 alone is off by the rescaling. Fails with the rescaling applied on one side
+    only."""
+    lin = LinearSolver(MPI.COMM_SELF, {}, kept_only=True)
+    op, P = _chain(list(range(0, 20)))
+    d_P = np.diag(P).copy()
+    lin.reference_diagonal = d_P
+    lin.set_operator(*op)
+    assert lin.factorisations == 1
+    t = 1.0 + 0.5 * np.sin(np.arange(40.0))     # every row's weight changed, by up to a half
+    A = t[:, None] * P * t[None, :]
+    lin.refit(op[-1], np.diag(A).copy())
+    rhs = np.cos(np.arange(40.0))
+    x = lin.solve(rhs)
+    ref = np.linalg.solve(A, rhs)
+    assert np.abs(x - ref).max() <= 1e-10 * np.abs(ref).max()
+    assert lin.factorisations == 1
+    plain = np.linalg.solve(P, rhs)
+    assert np.abs(plain - ref).max() > 0.1 * np.abs(ref).max()   # (the rescaling is what makes it exact)
+    lin.destroy()
