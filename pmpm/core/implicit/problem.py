@@ -114,7 +114,8 @@ class GridProblem:
         if self._evaluated is not None and np.array_equal(self._evaluated, u):
             return
         self._evaluated = u.copy()
-        IK.deformation_increment(self.x, self.expand(u.copy()), *self.geometry, self.f, self.E)
+        U = u if self.edges is None else self.edges.expand(u.copy())
+        IK.deformation_increment(self.x, U, *self.geometry, self.f, self.E)
         p = self.s.particles
         self.S = self.stress0.copy()
         self.state = [{k: (v.copy() if v is not None else None) for k, v in st.items()} for st in self.state0]

@@ -332,7 +332,8 @@ class ImplicitNewmark:
         (Newmark, FLIP increments), stresses and states pushed forward, volumes, strains, and
         the energy bookkeeping the solver's checks read."""
         p = s.particles
-        u = problem.expand(u.copy())   # the slaved edge nodes' increments, which the particles read
+        if self.edges is not None:   # the slaved edge nodes' increments, which the particles read
+            u = self.edges.expand(u.copy())
         R = problem.internal_force(u) + problem.fext     # also leaves S, state of u
         held = problem.dofs.held & problem.dofs.owned_active[..., None]
         self.held_force = s.decomp.allreduce_sum(np.where(held, R, 0.0).sum(axis=(0, 1)))
