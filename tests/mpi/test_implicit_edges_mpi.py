@@ -45,8 +45,12 @@ def test_slaved_edges_same_on_any_rank_count(dynamic):
         ref = _figures(pmpm.run(_strip_scene(0.0, 0.01, axis="x", dynamic=dynamic), comm=MPI.COMM_SELF,
                                 dataframes=False))
         got = _figures(par)
-        for k in ref:
-            err = np.abs(got[k] - ref[k]).max() / np.abs(ref[k]).max()
+        for k in ref:   # (a reaction row before the first step is NaN on every rank count)
+            x, y = got[k][np.isfinite(got[k])], ref[k][np.isfinite(ref[k])]
+            if x.shape != y.shape or not y.size:
+                report += f" {k}: {x.shape} vs {y.shape}"
+                continue
+            err = np.abs(x - y).max() / np.abs(y).max()
             if not err <= RTOL:
                 report += f" {k}: {err:.3g}"
         assert np.abs(ref["drift"]).max() > 1e-5   # the strip moved
