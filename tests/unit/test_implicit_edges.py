@@ -22,12 +22,12 @@ pmpm.core.implicit.edges; docs/implicit.md "The points as the quadrature of the 
 * Refused (ConfigError naming the key) with Rayleigh damping (a term the fold does not carry)
   and with a load-factor control.
 
-Shown to fail on planted bugs (restored): either refusal removed -> its test fails; the tangent's fold skipped (``fold_tangent`` not
-called in GridProblem.tangent) -> 21 Newton iterations instead of 3 in the strip's step; the
-residual left unfolded (the fold in GridProblem.internal_force removed) -> the base shear
-0.025 % off the load; the grid's fields left unfolded (ImplicitNewmark._edge_slaves) -> the
-linear solve diverges; the expansion's factor 2 written as 1 -> the twin and linear-field tests
-fail.
+Shown to fail on planted bugs (restored): either refusal removed -> its test fails; the
+tangent's fold skipped (``fold_tangent`` not called in GridProblem.tangent) -> 21 Newton
+iterations instead of 3 in the strip's step; the residual left unfolded (the fold in
+GridProblem.internal_force removed) -> the base shear 0.025 % off the load; the grid's fields
+left unfolded (ImplicitNewmark._edge_slaves) -> the linear solve diverges; the expansion's
+factor 2 written as 1 -> the twin and linear-field tests fail.
 """
 import numpy as np
 import pytest
@@ -151,10 +151,12 @@ TOP = LENGTH - 0.05 / 4
 def _strip_scene(offset, ratio, length=LENGTH, h=0.05, axis="auto", dynamic=False):
     col = dict(SECTION, name="column", material="steel", start=[offset, 0.0], end=[offset, length])
     data = {"title": "I-section strip", "formulation": "plane_stress", "particles_per_cell": 2,
-            "grid": {"origin": [-0.5, 0.0], "cell_size": h, "cells": [int(round(1.0 / h)), int(round((length + 0.3) / h))]},
+            "grid": {"origin": [-0.5, 0.0], "cell_size": h,
+                     "cells": [int(round(1.0 / h)), int(round((length + 0.3) / h))]},
             "materials": {"steel": {"type": "linear_elastic", "E": 207e9, "nu": 0.3, "density": 7850.0}},
             "bodies": [col],
-            "boundary": [{"name": "base", "type": "fixed", "lower": [-0.5, 0.0], "upper": [0.5, 0.0], "reaction": True}],
+            "boundary": [{"name": "base", "type": "fixed", "lower": [-0.5, 0.0], "upper": [0.5, 0.0],
+                          "reaction": True}],
             "loads": {"forces": [{"name": "push", "body": "column", "lower": [-0.5, length - h],
                                   "upper": [0.5, length + h], "force": [1e5, 0.0]}]},
             "solver": {"integrator": "implicit", "analysis": "dynamic" if dynamic else "static",
