@@ -59,12 +59,14 @@ class Setting:
     xpic_order: int = 2
     ppc: int = 2
     time_step: float = 0.0      # > 0: the implicit integrator (Newmark, docs/implicit.md) at this step
+    edge_mass_ratio: float = 0.0   # implicit: [solver.implicit] edge_mass_ratio (pmpm.core.implicit.edges)
 
     @property
     def label(self):
         if self.time_step > 0:
             return (f"{self.cell:g} m {self.shape} {self.ppc}x{self.ppc} implicit dt = T1/"
-                    f"{FE_PERIOD_NOMINAL / self.time_step:.0f} ({1e3 * self.time_step:.3g} ms)")
+                    f"{FE_PERIOD_NOMINAL / self.time_step:.0f} ({1e3 * self.time_step:.3g} ms)"
+                    + (f" edge_mass_ratio {self.edge_mass_ratio:g}" if self.edge_mass_ratio else ""))
         t = f"xpic({self.xpic_order})" if self.transfer == "xpic" else self.transfer
         if self.scheme == "mls":   # the scheme brings its affine transfer (pmpm.core.mls)
             t = "affine"
@@ -122,7 +124,13 @@ def frame_scene(setting, t_end):
     scene = regrid(setting.cell, setting.shape, setting.scheme, setting.ppc, t_end, cfl=setting.cfl)
     solver = dataclasses.replace(scene.solver, transfer=setting.transfer, xpic_order=setting.xpic_order)
     scene = dataclasses.replace(scene, solver=solver)
-    return implicit_scene(scene, setting.time_step) if setting.time_step > 0 else scene
+    if setting.time_step <= 0:
+        return scene
+    scene = implicit_scene(scene, setting.time_step)
+    if setting.edge_mass_ratio:
+        implicit = dict(scene.solver.implicit, edge_mass_ratio=setting.edge_mass_ratio)
+        scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, implicit=implicit))
+    return scene
 
 
 def implicit_scene(scene, time_step):
@@ -346,6 +354,8 @@ def main(argv=None, out=None):
     ap.add_argument("--only", type=int, nargs="+", metavar="K", help="run only these of the settings (0-based)")
     ap.add_argument("--end", type=float, help="end time (s), default 0.25 (quick: 0.05)")
     ap.add_argument("--list", action="store_true", help="list the settings and exit")
+    ap.add_argument("--edge-mass-ratio", type=float, default=0.0,
+                    help="the implicit rows with [solver.implicit] edge_mass_ratio (pmpm.core.implicit.edges)")
     args = ap.parse_args(argv)
     settings = QUICK if args.quick else IMPLICIT if args.implicit else FULL
     if args.list:
@@ -354,6 +364,9 @@ def main(argv=None, out=None):
         return 0
     if args.only:
         settings = tuple(settings[k] for k in args.only)
+    if args.edge_mass_ratio:
+        settings = tuple(dataclasses.replace(s, edge_mass_ratio=args.edge_mass_ratio) if s.time_step > 0 else s
+                         for s in settings)
     t_end = args.end or (QUICK_T_END if args.quick else T_END)
     rows = study(settings, t_end, QUICK_FE_LEVEL if args.quick else FE_LEVEL, args.outdir)
     print(markdown(rows), file=out)

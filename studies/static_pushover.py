@@ -1,7 +1,8 @@
 """The portal's static pushover (implicit integrator, ``solver.analysis = "static"``) against
 the dynamic one and the sway mechanism (docs/implicit.md, "Static analyses").
 
-    python -m studies.static_pushover [--cell 0.05] [--skip-dynamic] [--skip-mechanism]
+    python -m studies.static_pushover [--cell 0.05] [--ppc 2] [--shift 0] [--edge-mass-ratio 0]
+                                      [--skip-dynamic] [--skip-mechanism]
 
 1. Initial stiffness: the elastic portal (cases/portal_pushover.toml's frame) pushed 20 mm in 4
    static steps, base shear over the joint's drift (least squares through the origin), beside
@@ -37,18 +38,29 @@ def base_shear(r):
     return -(np.asarray(R["left_base"]["Rx"]) + np.asarray(R["right_base"]["Rx"]))
 
 
-def static_stiffness(cell, push=0.02, steps=4):
-    """(stiffness N/m, wall s, base shear, drift) of the static elastic push."""
+def static_stiffness(cell, push=0.02, steps=4, ppc=None, shift=0.0, edge_mass_ratio=0.0):
+    """(stiffness N/m, wall s, base shear, drift) of the static elastic push (``ppc``: points
+    per cell, default the case's 2; ``shift``: the grid moved by this much along x, which moves
+    the members' edges against the grid lines: docs/implicit.md, "The points as the quadrature
+    of the strips"); ``edge_mass_ratio``: the implicit option, pmpm.core.implicit.edges)."""
+    data = portal_pushover_data(cell, push, steps, ELASTIC, root=ROOT)
+    if ppc is not None:
+        data["particles_per_cell"] = ppc
+    data["grid"]["origin"] = [data["grid"]["origin"][0] + shift, data["grid"]["origin"][1]]
+    if edge_mass_ratio:
+        data["solver"]["implicit"] = {"edge_mass_ratio": edge_mass_ratio}
     start = time.perf_counter()
-    r = pmpm.run(portal_pushover_data(cell, push, steps, ELASTIC, root=ROOT), dataframes=False)
+    r = pmpm.run(data, dataframes=False)
     wall = time.perf_counter() - start
     V, u = base_shear(r)[1:], np.asarray(r.histories["upper_left_joint"]["ux"])[1:]
     return float(np.dot(u, V) / np.dot(u, u)), wall, V, u
 
 
-def dynamic_stiffness(cell, push=0.02, hold_from=0.03, end=0.04):
+def dynamic_stiffness(cell, push=0.02, hold_from=0.03, end=0.04, ppc=None):
     """(stiffness N/m, wall s) of the explicit push of tests/verification/test_pushover.py."""
     data = read_toml(os.path.join(ROOT, "cases", "portal_pushover.toml"))
+    if ppc is not None:
+        data["particles_per_cell"] = ppc
     data["grid"]["cell_size"] = cell
     data["grid"]["cells"] = [int(round(7.1 / cell)), int(round(4.2 / cell))]
     data["materials"]["steel"] = dict(ELASTIC)
@@ -110,11 +122,16 @@ def main(argv=None):
     ap.add_argument("--mechanism-steps", type=int, default=20)
     ap.add_argument("--material", choices=("smooth_vonmises", "bilinear_vonmises"), default="smooth_vonmises",
                     help="the mechanism run's steel (the case's smooth model, or J2 with its consistent tangent)")
+    ap.add_argument("--ppc", type=int, default=None, help="points per cell of the elastic pushes (the case's 2)")
+    ap.add_argument("--shift", type=float, default=0.0, help="move the static push's grid by this much along x (m)")
+    ap.add_argument("--edge-mass-ratio", type=float, default=0.0,
+                    help="[solver.implicit] edge_mass_ratio of the static push (0: off)")
     ap.add_argument("--skip-dynamic", action="store_true")
     ap.add_argument("--skip-mechanism", action="store_true")
     args = ap.parse_args(argv)
-    out = {"cell": args.cell}
-    k_static, wall, V, u = static_stiffness(args.cell)
+    out = {"cell": args.cell, "ppc": args.ppc or 2, "grid_shift": args.shift, "edge_mass_ratio": args.edge_mass_ratio}
+    k_static, wall, V, u = static_stiffness(args.cell, ppc=args.ppc, shift=args.shift,
+                                            edge_mass_ratio=args.edge_mass_ratio)
     k_fe = fe_stiffness()
     out.update(static_stiffness=k_static, static_wall=wall, fe_stiffness=k_fe, static_over_fe=k_static / k_fe,
                static_step_secant=[float(x) for x in V / u])
@@ -122,7 +139,7 @@ def main(argv=None):
           f"FE model {k_fe / 1e6:.4g} MN/m (ratio {k_static / k_fe:.4f}); per step "
           + ", ".join(f"{x / 1e6:.4g}" for x in V / u))
     if not args.skip_dynamic:
-        k_dyn, wall = dynamic_stiffness(args.cell)
+        k_dyn, wall = dynamic_stiffness(args.cell, ppc=args.ppc)
         out.update(dynamic_stiffness=k_dyn, dynamic_wall=wall, static_over_dynamic=k_static / k_dyn)
         print(f"dynamic (explicit) push: k = {k_dyn / 1e6:.4g} MN/m ({wall:.1f} s); static / dynamic = "
               f"{k_static / k_dyn:.4f}")

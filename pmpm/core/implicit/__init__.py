@@ -6,6 +6,7 @@ the materials' tangents as the stiffness, PETSc for the linear solve.
     kernels        numba kernels: step deformation, internal force, tangent blocks, Newmark update
     reference      their NumPy twins (tests)
     dofs           the step's unknowns: mass rule, global numbering over the slabs, block CSR
+    edges          edge nodes slaved to their inward neighbours (edge_mass_ratio): folds, expansion
     newmark        the time integration rule
     newton         Newton's method with a line search
     problem        one step's residual and tangent on a rank's window

@@ -22,6 +22,8 @@
     hht_alpha = 0.0                # HHT-alpha in [-1/3, 0]: damping of the highest modes
     initial_static = false         # dynamics: first bring the loads at the start time (gravity,
                                    # the force sets' values) to static equilibrium, then go on
+    edge_mass_ratio = 0.0          # > 0: slave every edge node lighter than this fraction of its
+                                   # two inward neighbours to them (pmpm.core.implicit.edges)
 
     [solver.static]                # analysis = "static": what drives the steps (docs/implicit.md)
     control = "load"               # "load": the loads' time functions (default) | "displacement":
@@ -60,7 +62,7 @@ KRYLOV_KEYS = ("krylov_tolerance", "krylov_iterations")
 IMPLICIT_SCHEME = "newmark"
 IMPLICIT_DEFAULTS = {"residual_tolerance": 1e-8, "energy_tolerance": 1e-12, "max_iterations": 25,
                      "newton": "full", "line_search": False, "max_halvings": 6, "hht_alpha": 0.0, "initial_static": False,
-                     "krylov_tolerance": 1e-6, "krylov_iterations": 10}
+                     "krylov_tolerance": 1e-6, "krylov_iterations": 10, "edge_mass_ratio": 0.0}
 
 
 def read_integrator(t):
@@ -99,7 +101,11 @@ def read_implicit(t):
            # newton = "krylov": the GMRES on each tangent (pmpm.core.implicit.kept_factorisation)
            "krylov_tolerance": t.number("krylov_tolerance", d["krylov_tolerance"], low=0.0, high=1.0,
                                         low_open=True, high_open=True),
-           "krylov_iterations": t.integer("krylov_iterations", d["krylov_iterations"], low=1, high=1000)}
+           "krylov_iterations": t.integer("krylov_iterations", d["krylov_iterations"], low=1, high=1000),
+           # slave the edge nodes lighter than this fraction of their inward neighbours
+           # (pmpm.core.implicit.edges; 0: off)
+           "edge_mass_ratio": t.number("edge_mass_ratio", d["edge_mass_ratio"], low=0.0, high=1.0,
+                                       high_open=True)}
     if out["newton"] != "krylov":
         for key in KRYLOV_KEYS:
             if t.has(key):
@@ -221,6 +227,9 @@ def check_implicit_scene(scene, materials):
             raise ConfigError(key, f"{why} (solver.integrator = \"implicit\")")
     if cfg.static is not None:
         _check_static(scene)
+        if cfg.implicit.get("edge_mass_ratio"):
+            raise ConfigError("solver.implicit.edge_mass_ratio", "not with a load factor control ([solver.static]) "
+                                                                 "yet: its pattern and point weights are not folded")
     for label, m in zip(scene.materials, materials):
         if not m.has_tangent:
             raise ConfigError(f"materials.{label}.type", f"{m.name} has no tangent for the implicit integrator yet")

@@ -61,10 +61,15 @@ class GridProblem:
     fext_start : ndarray (nx, ny, 2), optional
         External nodal forces at the step's start (HHT-alpha only: its residual weighs the
         start's forces by -alpha).
+    edges : pmpm.core.implicit.edges.EdgeSlaves, optional
+        Edge nodes slaved to their inward neighbours (the grid's scattered fields already
+        folded): the particles read expanded increments, forces and the tangent are folded.
     """
 
-    def __init__(self, s, linear, rule, fext, v, a, fext_start=None, terms=()):
+    def __init__(self, s, linear, rule, fext, v, a, fext_start=None, terms=(), edges=None):
         self.s, self.linear, self.rule = s, linear, rule
+        # slaved edge nodes (pmpm.core.implicit.edges; None: every node with mass is an unknown)
+        self.edges = edges
         w, g = s.window, s.grid
         self.mass = w.G[..., 0]
         held = w.bc_mask.astype(bool)
@@ -111,7 +116,8 @@ class GridProblem:
         if self._evaluated is not None and np.array_equal(self._evaluated, u):
             return
         self._evaluated = u.copy()
-        IK.deformation_increment(self.x, u, *self.geometry, self.f, self.E)
+        U = u if self.edges is None else self.edges.expand(u.copy())
+        IK.deformation_increment(self.x, U, *self.geometry, self.f, self.E)
         p = self.s.particles
         self.S = self.stress0.copy()
         self.state = [{k: (v.copy() if v is not None else None) for k, v in st.items()} for st in self.state0]
@@ -125,8 +131,15 @@ class GridProblem:
         self.evaluate(u)
         R = np.zeros(self.mass.shape + (2,))
         IK.internal_force(self.x, self.vol, self.S, self.f, R, *self.geometry)
+        if self.edges is not None:   # before the halo sum: the fold stays in the particles' stencils
+            self.edges.fold(R)
         self.s.decomp.sum_halo(R)
         return R
+
+    def expand(self, W):
+        """``W`` (a window array, in place) with the slaved edge nodes' values extrapolated from
+        their targets (unchanged without slaved nodes)."""
+        return W if self.edges is None else self.edges.expand(W)
 
     def _start_force_scale(self):
         """The norm of the internal and external forces at the step's start (u = 0); keeps
@@ -168,8 +181,12 @@ class GridProblem:
             m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
                       k if several else -1)
         span = d.span
-        Kb = np.zeros((d.n_local, span * span, 2, 2))
-        IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, d.lid, Kb, *self.geometry)
+        lid, rows = (d.lid, d.n_local) if self.edges is None else self.edges.extended_lid(d.lid)
+        Kb = np.zeros((rows, span * span, 2, 2))
+        IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, lid, Kb, *self.geometry)
+        if self.edges is not None:   # T^T K T (no terms with slaved nodes: the scheme refuses them)
+            self.edges.fold_tangent(Kb, lid, span)
+            Kb = Kb[:d.n_local]
         if self.linear.kept_only:   # (before the terms: the diagonal of kept_diagonal's kind)
             self.linear.reference_diagonal = self._diagonal_of_D()
         for term in self.terms:

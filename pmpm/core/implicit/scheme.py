@@ -20,10 +20,11 @@ import logging
 import numpy as np
 
 from pmpm.core import kernels as K
-from pmpm.core.effects import ConvergedStep
+from pmpm.core.effects import ConvergedStep, Effect
 from pmpm.core.implicit import kernels as IK
 from pmpm.core.implicit.arclength import make_control
 from pmpm.core.implicit.control import linear_predictor
+from pmpm.core.implicit.edges import EdgeSlaves, owned_mask
 from pmpm.core.implicit.linear_solver import LinearSolver
 from pmpm.core.implicit.newmark import Newmark
 from pmpm.core.implicit.newton import NewtonFailed, newton
@@ -60,6 +61,7 @@ class ImplicitNewmark:
         self.stats = {"steps": 0, "newton_iterations": 0, "factorisations": 0, "tangents": 0, "residual_evaluations": 0,
                       "linear_iterations": 0, "halvings": 0}
         self.history = []          # (|R|, energy) of the last step's iterations
+        self.edges = None          # the step's slaved edge nodes (edge_mass_ratio; pmpm.core.implicit.edges)
         self.held_force = np.zeros(2)   # sum of the nodal forces on held components (last step)
         self.options_checked = False
 
@@ -88,6 +90,11 @@ class ImplicitNewmark:
         if not grid_fields.implicit_support:
             raise ConfigError(grid_fields.scene_key, "is explicit-only for now (solver.integrator = \"implicit\", "
                                          "docs/implicit.md)")
+        if self.options.get("edge_mass_ratio"):
+            for effect in effects:   # their terms' forces and tangents are not folded yet
+                if type(effect).implicit_term is not Effect.implicit_term:
+                    raise ConfigError("solver.implicit.edge_mass_ratio", f"not with {effect.name} yet (its implicit "
+                                                                         f"term is not folded onto the slaved nodes)")
 
     # -- one scene step, in as many sub-steps as Newton needs ------------------------------
     def advance(self, s, dt):
@@ -187,6 +194,23 @@ class ImplicitNewmark:
                                        s.gravity, *geometry)
         _scatter_point_forces(s, t_load, geometry)
         s.exchange_halo(slice(0, 7))
+        self.edges = self._edge_slaves(s)
+
+    def _edge_slaves(self, s):
+        """``edge_mass_ratio``: the step's slaved edge nodes, with the grid's mass, momentum,
+        forces and m a folded onto their targets (pmpm.core.implicit.edges); None without."""
+        ratio = self.options.get("edge_mass_ratio", 0.0)
+        if not ratio:
+            return None
+        G = s.window.G
+        edges = EdgeSlaves(G[..., MASS], s.mass_cutoff, s.window.bc_mask.astype(bool),
+                           owned_mask(G.shape[:2], s._owned_local), s.decomp, ratio)
+        fields = np.ascontiguousarray(G[..., :7])
+        edges.fold(fields)
+        s.decomp.fill(fields)   # (a ghost target's slaved node may lie past the window)
+        G[..., :7] = fields
+        self.stats["slaved_nodes"] = int(s.decomp.allreduce_sum(edges.count_owned))   # (the last step's)
+        return edges
 
     def external_forces(self, s, t, x=None):
         """Halo-summed external nodal forces at time ``t`` (weight and point loads), in a
@@ -201,6 +225,8 @@ class ImplicitNewmark:
             IK.scatter_inertia_and_gravity(x, p["m"], None, s.gravity, *geometry)
         _scatter_point_forces(s, t, geometry, x)
         F = np.ascontiguousarray(T[..., FORCE])
+        if self.edges is not None:
+            self.edges.fold(F)
         s.decomp.sum_halo(F)
         return F
 
@@ -242,7 +268,8 @@ class ImplicitNewmark:
         applied at t = 0 is felt at once."""
         self.grid_from_particles(s, s.t)
         v, _ = self.nodal_start(s)
-        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), v, None, None, self.terms)
+        problem = GridProblem(s, self.linear, None, s.window.G[..., FORCE].copy(), v, None, None, self.terms,
+                              self.edges)
         zero = np.zeros(s.window.G.shape[:2] + (2,))
         force = problem.internal_force(zero) + s.window.G[..., FORCE]
         for f in problem.term_start:   # damping of the start velocities
@@ -250,7 +277,7 @@ class ImplicitNewmark:
                 force += f
         m = s.window.G[..., MASS]
         active = (m > s.mass_cutoff)[..., None] & ~s.window.bc_mask.astype(bool)
-        a0 = np.where(active, force / np.where(m > s.mass_cutoff, m, 1.0)[..., None], 0.0)
+        a0 = problem.expand(np.where(active, force / np.where(m > s.mass_cutoff, m, 1.0)[..., None], 0.0))
         p = s.particles
         dx = np.empty((p.n, 2))
         x = p["x"].copy()
@@ -266,7 +293,8 @@ class ImplicitNewmark:
         for term in self.terms if self.dynamic else ():
             term.prescribe_start(s, t0, v, a)
         start = self.external_forces(s, t0) if self.dynamic and self.alpha else None
-        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start, self.terms)
+        problem = GridProblem(s, self.linear, rule, s.window.G[..., FORCE].copy(), v, a, start, self.terms,
+                              self.edges)
         u = rule.predictor(v, a) if self.dynamic else np.zeros(s.window.G.shape[:2] + (2,))
         u = np.where(problem.dofs.active[..., None], u, 0.0)
         held = problem.held_increment(h)
@@ -306,6 +334,8 @@ class ImplicitNewmark:
         (Newmark, FLIP increments), stresses and states pushed forward, volumes, strains, and
         the energy bookkeeping the solver's checks read."""
         p = s.particles
+        if self.edges is not None:   # the slaved edge nodes' increments, which the particles read
+            u = self.edges.expand(u.copy())
         R = problem.internal_force(u) + problem.fext     # also leaves S, state of u
         held = problem.dofs.held & problem.dofs.owned_active[..., None]
         self.held_force = s.decomp.allreduce_sum(np.where(held, R, 0.0).sum(axis=(0, 1)))
@@ -314,7 +344,8 @@ class ImplicitNewmark:
         if rule is not None:
             a_new = rule.acceleration(u, v, a)
             a_new = np.where(problem.dofs.active[..., None], a_new, 0.0)
-            dv = rule.velocity_change(a, a_new)
+            a_new = problem.expand(a_new)
+            dv = problem.expand(rule.velocity_change(a, a_new))
             for term in self.terms:   # the supports' own velocity change and acceleration
                 term.prescribe(s, t0, h, None, dv, a_new)
             vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
