@@ -10,7 +10,7 @@ from mpi4py import MPI
 from pmpm.build import build_solver
 from pmpm.core import kernels as K
 from pmpm.core.solver import Solver
-from pmpm.physics.materials.linear_elastic import LinearElastic
+from pmpm.physics.materials.linear_elastic import LinearElastic, _update_elastic_power
 from pmpm.core.schemes import make_scheme
 from pmpm.core.kernels.mls import g2p_mls, p2g_mls
 from pmpm.core.kernels.reference_mls import mls_g2p_reference, mls_p2g_reference
@@ -84,7 +84,7 @@ def test_g2p_mls_matches_reference(name):
     de = np.empty((len(v), 3))
     vmax, bad, *tail = g2p_mls(p["x"], v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
                                dx, dt, None, de, None, None, vol, None, None)
-    assert tail == [0.0, 0.0, 0, 0, 0]   # no fused tail asked: none computed
+    assert tail == [0.0, 0.0, 0, 0, 0, 0.0]   # no fused tail asked: none computed
     vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
     np.testing.assert_allclose(v, vp, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(C, Cp, rtol=1e-10, atol=1e-10)
@@ -153,7 +153,7 @@ def test_g2p_mls_fused_tail_matches_reference(name, axis):
     owned = (axis, 3, 5)
     x, v, C, dx, vol = p["x"].copy(), p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
     de = np.empty((len(v), 3))
-    vmax, bad, work, power, outside, leaving, inverted = g2p_mls(
+    vmax, bad, work, power, outside, leaving, inverted, after = g2p_mls(
         x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
         dx, dt, None, de, None, None, vol, None, None, p["m"], g, p["stress"], owned)
     vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
@@ -174,6 +174,39 @@ def test_g2p_mls_fused_tail_matches_reference(name, axis):
     # and the solver's own count of the moved particles agrees with the kernel's
     assert K.count_strays(x, vol, ORIGIN, 1 / H, CELLS[0], CELLS[1], *owned) == (outside, leaving, inverted)
     assert bad == 0 and vmax == pytest.approx(np.sqrt((vp ** 2).sum(1)).max(), rel=1e-12)
+    assert after == 0.0   # no stress map: the stress is not updated here
+
+
+@pytest.mark.parametrize("name", list(ORDER))
+def test_g2p_mls_applies_the_stress_map(name):
+    """With ``stress_map`` (a material's update as one linear map D, (4, 3) row by row) the
+    G2P adds D de_p to every particle's stress (szz included) and returns, besides the first
+    half of the internal work with the stress before (V_new sigma_old : de), the second half
+    V_new sigma_new : de, against the NumPy twin's de and volume and those sums written here.
+    D is a full random matrix (every entry reaches the stress). Tolerances: the twins' above;
+    the sums are of ~300 terms of order one. Shown to fail: with the szz row not applied, and
+    with the second half summed with the stress before the increment."""
+    p = _particles()
+    G = _grid()
+    G[..., 1:3] = np.random.default_rng(5).normal(size=G[..., 1:3].shape)
+    vel = G[..., 1:3].copy()
+    dt = 0.01
+    D = np.random.default_rng(9).normal(size=(4, 3)) * 50.0
+    owned = (0, 0, CELLS[0])
+    x, v, C, dx, vol = p["x"].copy(), p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
+    de = np.empty((len(v), 3))
+    stress = p["stress"].copy()
+    vmax, bad, work, power, outside, leaving, inverted, after = g2p_mls(
+        x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
+        dx, dt, None, de, None, None, vol, None, None, p["m"], None, stress, owned, tuple(D.ravel()))
+    vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
+    np.testing.assert_allclose(de, de_ref, rtol=1e-10, atol=1e-12)
+    new = p["stress"] + de_ref @ D.T
+    assert np.abs(de_ref @ D.T).min(axis=0).max() > 0 and np.abs(de_ref @ D.T)[:, 3].max() > 1e-3
+    np.testing.assert_allclose(stress, new, rtol=1e-10, atol=1e-10)
+    assert power == pytest.approx(np.sum(vol_ref * np.sum(p["stress"][:, :3] * de_ref, axis=1)), rel=1e-10)
+    assert after == pytest.approx(np.sum(vol_ref * np.sum(new[:, :3] * de_ref, axis=1)), rel=1e-10)
+    assert abs(after - power) > 1e-3 * abs(power)   # the two halves differ: each is checked
 
 
 @pytest.mark.parametrize("shape", ["quadratic", "cubic"])
@@ -202,8 +235,13 @@ def test_mls_step_with_the_fused_tail_is_the_step_without(shape, monkeypatch):
         for _ in range(60):
             s.step()
         return s
+    updates = []
+    monkeypatch.setattr(LinearElastic, "update_stress_power",
+                        lambda self, *a: updates.append(1) or _update_elastic_power(*a[:3], self.params,
+                                                                                   self.plane_strain, *a[4:]))
     fused = run()
-    assert fused.tail_fusable and fused.impulse_fusable
+    assert fused.tail_fusable and fused.impulse_fusable and fused._stress_map is not None
+    assert not updates   # the G2P applied the elastic map: the material's pass did not run
     monkeypatch.setattr(Solver, "tail_fusable", property(lambda self: False))
     monkeypatch.setattr(Solver, "impulse_fusable", property(lambda self: False))
     monkeypatch.setattr(LinearElastic, "sums_power", False)   # the second work half in its own pass too

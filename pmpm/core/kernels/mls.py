@@ -139,6 +139,24 @@ def _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy):
     return dyy * r, -dxy * r, dxx * r
 
 
+@nb.njit(cache=True, inline="always")
+def _apply_stress_map(p, stress, de, vol, D):
+    """stress_p += D de_p (``D`` the 12 entries of the (4, 3) map row by row, xx, yy, xy, zz
+    from exx, eyy, gxy); returns V_p sigma_p : de_p with the new stress (the second half of
+    the trapezoid internal work, pmpm.core.kernels.grid_ops.stress_power's terms)."""
+    e0 = de[p, 0]
+    e1 = de[p, 1]
+    e2 = de[p, 2]
+    s0 = stress[p, 0] + (D[0] * e0 + D[1] * e1 + D[2] * e2)
+    s1 = stress[p, 1] + (D[3] * e0 + D[4] * e1 + D[5] * e2)
+    s2 = stress[p, 2] + (D[6] * e0 + D[7] * e1 + D[8] * e2)
+    stress[p, 3] += D[9] * e0 + D[10] * e1 + D[11] * e2
+    stress[p, 0] = s0
+    stress[p, 1] = s1
+    stress[p, 2] = s2
+    return vol[p] * (s0 * e0 + s1 * e1 + s2 * e2)
+
+
 @nb.njit(cache=True, fastmath={"contract"})
 def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
             G, ox, oy, origin, inv_h, ncx, ncy, shape, impulse_dt=None):
@@ -186,7 +204,7 @@ def p2g_mls(x, m, v, C, vol, stress, gravity, load_id, load_w, load_vec,
 
 @nb.njit(cache=True, fastmath={"contract"})
 def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
-            strain, de, dw, F, vol, vol0, dq, m=None, gravity=None, stress=None, owned=None):
+            strain, de, dw, F, vol, vol0, dq, m=None, gravity=None, stress=None, owned=None, stress_map=None):
     """v_p = sum N_ip v_i and C_p = sum v_i g_ip^T (1/s, into ``C``) from the grid velocities
     in fields 1, 2; ``dx`` receives dt v_p; the strain increment dt sym C_p into ``de``, its
     spin into ``dw``, ``strain``, the volume and F (``F``, ``vol0``, ``dq`` as
@@ -201,11 +219,18 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
       cell columns (the particle's x is read for its weights before it moves);
     * ``stress`` given: the first half of the step's trapezoid internal work, sum_p V_p
       sigma_p : de_p with the stress before its update and the new volume
-      (pmpm.core.kernels.grid_ops.stress_power, as the solver's update_stress takes it).
+      (pmpm.core.kernels.grid_ops.stress_power, as the solver's update_stress takes it);
+    * ``stress_map`` given (with ``stress``): the material's stress update, when it is one
+      constant linear map d(sxx, syy, sxy, szz) = D d(exx, eyy, gxy) for every particle
+      (pmpm.physics's Material.increment_matrix; the 12 entries of D row by row: the core
+      applies a matrix the material hands it and knows no material law), and the second half
+      of the internal work with the new stress. What the Taichi programs do in their G2P (Hu
+      et al.'s G2P with the constitutive update): the materials' own pass over the particles,
+      which reads the stress and the increment again, is left out.
 
     Returns (largest particle speed, number of particles whose velocity or C is not finite,
-    work of the body force over the moves, the stress power sum, outside, leaving, inverted);
-    the last five are 0 for a part not asked."""
+    work of the body force over the moves, the stress power sum, outside, leaving, inverted,
+    the stress power sum after the update); the last six are 0 for a part not asked."""
     vmax2 = 0.0
     bad = 0
     work = 0.0
@@ -213,6 +238,7 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
     outside = 0
     leaving = 0
     inverted = 0
+    power_after = 0.0
     K, B, I0, J0, WX, WY = block_buffers(shape)
     for p0 in range(0, x.shape[0], BLOCK):
         nq = block_start(x, p0, origin, inv_h, ncx, ncy, shape, B)
@@ -238,10 +264,12 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
             strain_increment(p, dt, cxx, cxy, cyx, cyy, de, dw, strain, vol, F, vol0, dq)
             if stress is not None:
                 power += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
+                if stress_map is not None:
+                    power_after += _apply_stress_map(p, stress, de, vol, stress_map)
             if m is not None:
                 work += move(p, x, dx, m, gravity, None, None, None)
                 o, lv, inv = stray(x, vol, p, origin, inv_h, ncx, ncy, owned[0], owned[1], owned[2])
                 outside += o
                 leaving += lv
                 inverted += inv
-    return vmax2 ** 0.5, bad, work, power, outside, leaving, inverted
+    return vmax2 ** 0.5, bad, work, power, outside, leaving, inverted, power_after
