@@ -48,10 +48,14 @@ class MLSTransfer(Transfer):
     def g2p(self, ctx, remap):
         p = ctx.particles
         strain, de, dw, F, vol0, dq = ctx.kinematics
-        args = (p["x"], p["v"], p["C"], *ctx.geometry, ctx.dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq)
-        if ctx.tail is not None:   # (vmax, bad, work, power, outside, leaving, inverted)
-            return g2p_mls(*args, *ctx.tail)
-        return g2p_mls(*args)[:2]
+        dx = ctx.dx
+        if ctx.tail is not None:   # (vmax, bad, work, power, outside, leaving, inverted, power after)
+            *tail, moves_read, increments_read = ctx.tail
+            dx = dx if moves_read else None     # the arrays nothing reads after the pass: not written
+            de = de if increments_read else None
+            return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq,
+                           *tail)
+        return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq)[:2]
 
 
 class MLS(Scheme):

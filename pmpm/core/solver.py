@@ -356,10 +356,15 @@ class Solver:
         the stress for the first half of the internal work (None when the stress is rotated
         first: the solver's pass takes it then), the owned cell columns (axis, c0, c1), the
         materials' stress update as one linear map (``_point_stress_map``; None: update_stress
-        runs the materials))."""
+        runs the materials), whether anything reads the moves ``_dx`` after the pass (point
+        loads' work: the ``after_move`` hooks), whether anything reads the increments ``_de``
+        after it (the materials' update, ``after_stress_update`` hooks)). Arrays nothing reads
+        are not written (pmpm.core.kernels.mls.g2p_mls)."""
         c0, c1 = self.decomp.owned
         return (self.particles["m"], self.gravity, None if self.rotates_stress else self.particles["stress"],
-                (self.axis, c0, min(c1, self.grid.cells[self.axis])), self._stress_map)
+                (self.axis, c0, min(c1, self.grid.cells[self.axis])), self._stress_map,
+                bool(self._hooks["after_move"]),
+                self._stress_map is None or bool(self._hooks["after_stress_update"]))
 
     def take_tail(self, work, power, outside, leaving, inverted, power_after=0.0):
         """The results of a G2P with the later passes folded in: the body force's work over the

@@ -35,8 +35,8 @@ import numpy as np
 from pmpm.core.kernels.affine import (D_FLOOR, affine_moments, affine_momentum, cell_position,
                                       store_velocity_update)
 from pmpm.core.kernels.locate import stray
-from pmpm.core.kernels.transfer import (block_buffers, block_start, gather2, gather_gradient, move, particle_forces,
-                                        scatter_p2g, strain_increment)
+from pmpm.core.kernels.transfer import (_external_force, block_buffers, block_start, gather2, gather_gradient, move,
+                                        particle_forces, scatter_p2g, strain_increment)
 from pmpm.core.shape import BLOCK
 
 __all__ = ["p2g_mls", "g2p_mls"]
@@ -140,13 +140,11 @@ def _inverse_moments(q, K, I0, J0, WX, WY, sx, sy, ncx, ncy):
 
 
 @nb.njit(cache=True, inline="always")
-def _apply_stress_map(p, stress, de, vol, D):
-    """stress_p += D de_p (``D`` the 12 entries of the (4, 3) map row by row, xx, yy, xy, zz
-    from exx, eyy, gxy); returns V_p sigma_p : de_p with the new stress (the second half of
-    the trapezoid internal work, pmpm.core.kernels.grid_ops.stress_power's terms)."""
-    e0 = de[p, 0]
-    e1 = de[p, 1]
-    e2 = de[p, 2]
+def _apply_stress_map(p, stress, e0, e1, e2, vol, D):
+    """stress_p += D de_p, de_p = (e0, e1, e2) (``D`` the 12 entries of the (4, 3) map row by
+    row, xx, yy, xy, zz from exx, eyy, gxy); returns V_p sigma_p : de_p with the new stress
+    (the second half of the trapezoid internal work, pmpm.core.kernels.grid_ops.stress_power's
+    terms)."""
     s0 = stress[p, 0] + (D[0] * e0 + D[1] * e1 + D[2] * e2)
     s1 = stress[p, 1] + (D[3] * e0 + D[4] * e1 + D[5] * e2)
     s2 = stress[p, 2] + (D[6] * e0 + D[7] * e1 + D[8] * e2)
@@ -155,6 +153,16 @@ def _apply_stress_map(p, stress, de, vol, D):
     stress[p, 1] = s1
     stress[p, 2] = s2
     return vol[p] * (s0 * e0 + s1 * e1 + s2 * e2)
+
+
+@nb.njit(cache=True, inline="always")
+def _move_by(p, x, ux, uy, m, gravity):
+    """x_p += (ux, uy); returns the body force's work over the move (pmpm.core.kernels.transfer.
+    move with the move in registers, not in an array)."""
+    x[p, 0] += ux
+    x[p, 1] += uy
+    fx, fy = _external_force(p, m, gravity, None, None, None)
+    return fx * ux + fy * uy
 
 
 @nb.njit(cache=True, fastmath={"contract"})
@@ -208,7 +216,9 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
     """v_p = sum N_ip v_i and C_p = sum v_i g_ip^T (1/s, into ``C``) from the grid velocities
     in fields 1, 2; ``dx`` receives dt v_p; the strain increment dt sym C_p into ``de``, its
     spin into ``dw``, ``strain``, the volume and F (``F``, ``vol0``, ``dq`` as
-    pmpm.core.kernels.transfer.strain_increment's).
+    pmpm.core.kernels.transfer.strain_increment's). ``dx`` and ``de`` may be None (not kept:
+    two arrays fewer to write) where nothing reads them after the pass: ``dx`` with the move
+    folded in (``m`` given), ``de`` with the stress map applied here (``stress_map``).
 
     The step's particle passes after the G2P, in the same pass when asked (``None``: not,
     compiled out; the scheme asks when nothing acts between them, pmpm.core.mls):
@@ -263,11 +273,18 @@ def g2p_mls(x, v, C, G, ox, oy, origin, inv_h, ncx, ncy, shape, dx, dt,
             vmax2, bad = store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad)
             strain_increment(p, dt, cxx, cxy, cyx, cyy, de, dw, strain, vol, F, vol0, dq)
             if stress is not None:
-                power += vol[p] * (stress[p, 0] * de[p, 0] + stress[p, 1] * de[p, 1] + stress[p, 2] * de[p, 2])
+                # the increment as strain_increment computes it (the same expressions), from registers
+                e0 = dt * cxx
+                e1 = dt * cyy
+                e2 = dt * (cxy + cyx)
+                power += vol[p] * (stress[p, 0] * e0 + stress[p, 1] * e1 + stress[p, 2] * e2)
                 if stress_map is not None:
-                    power_after += _apply_stress_map(p, stress, de, vol, stress_map)
+                    power_after += _apply_stress_map(p, stress, e0, e1, e2, vol, stress_map)
             if m is not None:
-                work += move(p, x, dx, m, gravity, None, None, None)
+                if dx is None:   # the move not kept: x += dt v_p directly (move's expressions)
+                    work += _move_by(p, x, dt * vx, dt * vy, m, gravity)
+                else:
+                    work += move(p, x, dx, m, gravity, None, None, None)
                 o, lv, inv = stray(x, vol, p, origin, inv_h, ncx, ncy, owned[0], owned[1], owned[2])
                 outside += o
                 leaving += lv
