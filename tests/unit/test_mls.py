@@ -279,6 +279,42 @@ def test_mls_step_with_the_fused_tail_is_the_step_without(shape, monkeypatch):
     assert fused.internal_work == pytest.approx(apart.internal_work, rel=1e-12)
 
 
+@pytest.mark.parametrize("loads", ["forces", "rayleigh"])
+def test_mls_step_keeps_the_arrays_its_effects_read(loads, monkeypatch):
+    """The fused G2P leaves out the moves (``dx``) and increments (``de``) only where nothing
+    reads them after it: a point load's work reads the moves (``after_move``), Rayleigh
+    damping's viscous stress the increments (``after_stress_update``). Against the same step
+    with every fusion off (tail_fusable, impulse_fusable False), 40 steps of the bar with the
+    point load on its free end or Rayleigh damping: the state, the works and the damping's
+    work agree to round-off (tolerance as in the test above). Shown to fail: with the moves
+    or the increments left out regardless (the last two flags of Solver.tail_arguments
+    False), the external work (point load) or the viscous damping work (Rayleigh) differ."""
+    def run():
+        data = _bar_data("quadratic", v0=0.05)
+        data["solver"]["mass_cutoff"] = 0.0
+        h = L_BAR / 50
+        data["loads"] = ({"forces": [{"lower": [L_BAR - h, 0.0], "upper": [L_BAR, h], "force": [0.05, 0.0]}]}
+                         if loads == "forces" else {"damping": {"ratio": 0.05, "periods": [PERIOD, PERIOD / 3]}})
+        s = build_solver(parse_scene(data, "bar.toml"), MPI.COMM_SELF)
+        for _ in range(40):
+            s.step()
+        return s
+    fused = run()
+    assert fused.tail_fusable and fused._stress_map is not None
+    assert fused.tail_arguments()[-2:] == ((True, False) if loads == "forces" else (False, True))
+    monkeypatch.setattr(Solver, "tail_fusable", property(lambda self: False))
+    monkeypatch.setattr(Solver, "impulse_fusable", property(lambda self: False))
+    apart = run()
+    for name in ("x", "v", "stress"):
+        ref = apart.particles[name]
+        np.testing.assert_allclose(fused.particles[name], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    ef, ea = fused.energies(), apart.energies()
+    for key in ("external_work", "internal_work", "viscous_damping_work"):
+        if key in ea:
+            assert ef[key] == pytest.approx(ea[key], rel=1e-10, abs=1e-12 * abs(ea["internal_work"]))
+    assert abs(ea["external_work" if loads == "forces" else "viscous_damping_work"]) > 0
+
+
 def _spinning_block(scheme, shape, transfer="flip"):
     """A free elastic L-shaped body, spinning, drifting and stretching, far from the grid's
     origin and from the point the angular momentum is taken about; no supports, no loads, no
