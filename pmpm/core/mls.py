@@ -12,7 +12,10 @@ five) unless the grid update needs the force apart (nodal damping, a hook after 
 ``impulse_fusable``), and the move, the step-end count of particles that left the grid or the slab and the first
 half of the internal work run inside the G2P's pass unless something acts between them (held
 particles: ``tail_fusable``); a stream over the particle arrays each, a fifth of the quadratic
-step before (docs/performance.md).
+step before (docs/performance.md). With the tail folded in, the G2P also applies the stress
+update where the materials' update is one linear map (one linear elastic law, no objective
+rate: Solver._point_stress_map, Material.increment_matrix), as Hu et al.'s G2P does, and leaves
+out the moves and increments arrays where no effect reads them after the pass.
 
 USL's order with APIC's transfer, and 2 K^2 node visits per particle-step where MUSL makes
 4 K^2. The scheme brings its transfer (``MLSTransfer``: the affine matrix C per particle);

@@ -24,8 +24,9 @@ wherever the support is not boundary-modified (``_inverse_moments``), the gather
 the scatter indexes a flat view of the grid, and both kernels let the compiler fuse multiplies
 and adds (FMA; no fast-math assumption about NaN or infinity, so the non-finite checks hold).
 The position update x += dx, the step-end count of strays and the first half of the internal
-work are folded into the G2P when the scheme asks (``g2p_mls``'s last arguments); the stress
-update stays the materials' pass.
+work are folded into the G2P when the scheme asks (``g2p_mls``'s last arguments), and so is
+the stress update where the material hands it as one linear map (``stress_map``: a matrix,
+so this module knows no material law and imports nothing of pmpm.physics).
 """
 import math
 
