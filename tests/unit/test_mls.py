@@ -209,6 +209,34 @@ def test_g2p_mls_applies_the_stress_map(name):
     assert abs(after - power) > 1e-3 * abs(power)   # the two halves differ: each is checked
 
 
+@pytest.mark.parametrize("axis", [0, 1])
+def test_g2p_mls_counts_strays_block_by_block(axis):
+    """The fused G2P recounts a block's strays one by one only where a particle of the block is
+    not settled (pmpm.core.kernels.mls._settled): 640 particles at rest (zero grid velocities)
+    in the owned columns [3, 5) of ``axis``, and in four blocks of 64 one particle each exactly
+    on the limits: at column 5 (leaving), 1e-12 cells below column 3 (leaving), exactly on
+    column 3 (not leaving), and one with a negative volume (inverted); the other six blocks
+    settled. The counts against the solver's own pass (pmpm.core.kernels.locate.count_strays,
+    floor and integer comparisons). Shown to fail: with ``s <= c1`` in _settled the particle on
+    column 5 is not counted."""
+    rng = np.random.default_rng(11)
+    n = 640
+    s = np.empty((n, 2))
+    s[:, axis] = rng.uniform(3.2, 4.8, n)
+    s[:, 1 - axis] = rng.uniform(1.5, 4.5, n)
+    vol = rng.uniform(0.1, 0.3, n)
+    s[70, axis] = 5.0
+    s[200, axis] = 3.0 - 1e-12
+    s[330, axis] = 3.0
+    vol[460] = -0.1
+    x = ORIGIN + s * H
+    G = _grid()
+    v, C, de = np.zeros((n, 2)), np.zeros((n, 4)), np.empty((n, 3))
+    out = g2p_mls(x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS["quadratic"], None, 0.01,
+                  None, de, None, None, vol, None, None, np.ones(n), None, None, (axis, 3, 5))
+    assert out[4:7] == K.count_strays(x, vol, ORIGIN, 1 / H, CELLS[0], CELLS[1], axis, 3, 5) == (0, 2, 1)
+
+
 @pytest.mark.parametrize("name", list(ORDER))
 def test_g2p_mls_without_the_moves_and_increments_arrays(name):
     """With the move and the stress map folded in, ``dx`` and ``de`` may be None (the scheme
