@@ -95,6 +95,40 @@ def test_g2p_mls_matches_reference(name):
 
 
 @pytest.mark.parametrize("name", ["quadratic", "cubic"])
+@pytest.mark.parametrize("axis", [0, 1])
+def test_mls_block_weights_are_the_shape_modules(name, axis):
+    """The MLS kernels' own block weights (pmpm.core.kernels.mls._axis_weights: no derivatives,
+    the edge test once per block) against pmpm.core.shape's block kernels: blocks
+    of 64 interior coordinates, each with one coordinate where the boundary modification or the
+    clamping must act (0, just inside each edge, on the last node, beyond the grid, 1e20,
+    -1e20, NaN, inf) and one with none; the first nodes exactly, the weights to round-off.
+    Shown to fail: with the edge test ``c < 0`` instead
+    of ``c < 1`` the block with a support reaching node -1 keeps the plain weights."""
+    from pmpm.core.kernels.mls import _axis_weights
+    from pmpm.core.shape import block_weights
+    order = ORDER[name]
+    K = order + 1
+    n = CELLS[axis]
+    rng = np.random.default_rng(12)
+    special = [None, 0.0, 0.3, 0.99, 1.2, n - 0.3, n - 1.2, n - 0.6, float(n), n + 0.7, -0.4,
+               1e20, -1e20, np.nan, np.inf]
+    for value in special:
+        s = rng.uniform(2.0, n - 2.0, 64)
+        if value is not None:
+            s[17] = value
+        x = np.zeros((64, 2))
+        x[:, axis] = ORIGIN[axis] + s * H
+        start, W = np.full(64, -7, np.int64), np.full((2 * K, 64), np.nan)
+        _axis_weights(x, 0, 64, axis, ORIGIN[axis], 1 / H, n, K, start, W)
+        ref_start, ref_W = np.empty(64, np.int64), np.empty((2 * K, 64))
+        block_weights(SHAPE_TAGS[name], (x[:, axis] - ORIGIN[axis]) * (1 / H), None, 64, n, ref_start, ref_W)
+        np.testing.assert_array_equal(start, ref_start, err_msg=f"coordinate {value}")
+        # weights (at most 1) within 2 ulp of 1: the compiler may contract the polynomials'
+        # multiply-adds (FMA) in one and not the other; the first nodes exactly
+        np.testing.assert_allclose(W[:K], ref_W[:K], rtol=0, atol=4.5e-16, err_msg=f"coordinate {value}")
+
+
+@pytest.mark.parametrize("name", ["quadratic", "cubic"])
 def test_mls_kernels_at_the_edge_of_the_plain_supports(name):
     """The kernels take D_p^-1 as the B-spline's constant (4 or 3 / cells^2) where a support is
     not boundary-modified and sum D_p elsewhere: particles on either side of that limit on
