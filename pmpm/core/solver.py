@@ -430,10 +430,9 @@ class Solver:
         """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
         p = self.particles
         if self._power_after is not None:   # the G2P applied the update (``_stress_map``)
-            (before, self._power_before), (after, self._power_after) = (self._power_before, None), \
-                (self._power_after, None)
-            self.internal_work += 0.5 * before
-            self.internal_work += 0.5 * after
+            self.internal_work += 0.5 * self._power_before
+            self.internal_work += 0.5 * self._power_after
+            self._power_before = self._power_after = None
             for after_update in self._hooks["after_stress_update"]:
                 after_update(self)
             return
