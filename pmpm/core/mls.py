@@ -12,7 +12,10 @@ five) unless the grid update needs the force apart (nodal damping, a hook after 
 ``impulse_fusable``), and the move, the step-end count of particles that left the grid or the slab and the first
 half of the internal work run inside the G2P's pass unless something acts between them (held
 particles: ``tail_fusable``); a stream over the particle arrays each, a fifth of the quadratic
-step before (docs/performance.md).
+step before (docs/performance.md). With the tail folded in, the G2P also applies the stress
+update where the materials' update is one linear map (one linear elastic law, no objective
+rate: Solver._point_stress_map, Material.increment_matrix), as Hu et al.'s G2P does, and leaves
+out the moves and increments arrays where no effect reads them after the pass.
 
 USL's order with APIC's transfer, and 2 K^2 node visits per particle-step where MUSL makes
 4 K^2. The scheme brings its transfer (``MLSTransfer``: the affine matrix C per particle);
@@ -48,10 +51,14 @@ class MLSTransfer(Transfer):
     def g2p(self, ctx, remap):
         p = ctx.particles
         strain, de, dw, F, vol0, dq = ctx.kinematics
-        args = (p["x"], p["v"], p["C"], *ctx.geometry, ctx.dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq)
-        if ctx.tail is not None:   # (vmax, bad, work, power, outside, leaving, inverted)
-            return g2p_mls(*args, *ctx.tail)
-        return g2p_mls(*args)[:2]
+        dx = ctx.dx
+        if ctx.tail is not None:   # (vmax, bad, work, power, outside, leaving, inverted, power after)
+            *tail, moves_read, increments_read = ctx.tail
+            dx = dx if moves_read else None     # the arrays nothing reads after the pass: not written
+            de = de if increments_read else None
+            return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq,
+                           *tail)
+        return g2p_mls(p["x"], p["v"], p["C"], *ctx.geometry, dx, ctx.dt, strain, de, dw, F, p["vol"], vol0, dq)[:2]
 
 
 class MLS(Scheme):

@@ -144,6 +144,10 @@ class Solver:
         # which update_stress and the step-end check then take instead of their own passes
         self._power_before = None
         self._strays = None
+        # ... and, where it applied the materials' stress update too (``_stress_map``), the
+        # second half of the internal work: update_stress then only adds the two halves
+        self._power_after = None
+        self._stress_map = self._point_stress_map()
         self._build_window()
         self.wave_speed = max(m.wave_speed() for m in self.materials)
         self.mass_cutoff = mass_cutoff * self.decomp.allreduce_max(
@@ -350,19 +354,42 @@ class Solver:
     def tail_arguments(self):
         """What a G2P with the step's later passes folded in needs: (m, body acceleration,
         the stress for the first half of the internal work (None when the stress is rotated
-        first: the solver's pass takes it then), the owned cell columns (axis, c0, c1))."""
+        first: the solver's pass takes it then), the owned cell columns (axis, c0, c1), the
+        materials' stress update as one linear map (``_point_stress_map``; None: update_stress
+        runs the materials), whether anything reads the moves ``_dx`` after the pass (point
+        loads' work: the ``after_move`` hooks), whether anything reads the increments ``_de``
+        after it (the materials' update, ``after_stress_update`` hooks)). Arrays nothing reads
+        are not written (pmpm.core.kernels.mls.g2p_mls)."""
         c0, c1 = self.decomp.owned
         return (self.particles["m"], self.gravity, None if self.rotates_stress else self.particles["stress"],
-                (self.axis, c0, min(c1, self.grid.cells[self.axis])))
+                (self.axis, c0, min(c1, self.grid.cells[self.axis])), self._stress_map,
+                bool(self._hooks["after_move"]),
+                self._stress_map is None or bool(self._hooks["after_stress_update"]))
 
-    def take_tail(self, work, power, outside, leaving, inverted):
+    def take_tail(self, work, power, outside, leaving, inverted, power_after=0.0):
         """The results of a G2P with the later passes folded in: the body force's work over the
-        moves, the first half of the internal work (kept for update_stress when it was taken)
-        and the strays (kept for the step-end check)."""
+        moves, the first half of the internal work (kept for update_stress when it was taken),
+        the strays (kept for the step-end check) and, where the G2P updated the stress
+        (``_stress_map``), the second half."""
         self.external_work += work
         self._power_before = None if self.rotates_stress else power
+        self._power_after = None if self._stress_map is None else power_after
         self._strays = (outside, leaving, inverted)
         self._work_of_moves()
+
+    def _point_stress_map(self):
+        """The materials' stress update as one linear map a G2P may apply per particle in its
+        own pass (the 12 entries of Material.increment_matrix row by row), or None: the update
+        is one pass of one material over every particle (one law), whose model hands such a map
+        (linear elasticity), with nothing between the G2P and the update (no objective rate
+        rotating the stress first, no plane-stress thickness of a run keeping F, no state)."""
+        if len(self._stress_passes) != 1 or self.rotates_stress or (self.keeps_F and self.options.plane_stress):
+            return None
+        material, which = self._stress_passes[0]
+        if which != -1 or material.state_fields or material.tensor_state_fields:
+            return None
+        D = material.increment_matrix()
+        return None if D is None else tuple(float(d) for d in D.ravel())
 
     def _kinematics_outputs(self):
         """Arrays the kinematics kernels fill or advance this step, None where the scene does
@@ -402,6 +429,13 @@ class Solver:
     def update_stress(self):
         """Stress increments through each material's tangent (eq. 6 / eq. 15)."""
         p = self.particles
+        if self._power_after is not None:   # the G2P applied the update (``_stress_map``)
+            self.internal_work += 0.5 * self._power_before
+            self.internal_work += 0.5 * self._power_after
+            self._power_before = self._power_after = None
+            for after_update in self._hooks["after_stress_update"]:
+                after_update(self)
+            return
         self._rotate(p["stress"])
         # internal work by the trapezoid rule, half before and half after the update; it closes
         # the energy balance exactly where 1/2 sigma : C^-1 : sigma (hypoelastic) does not
@@ -569,7 +603,7 @@ class Solver:
         if 0 < remaining < dt:  # land on the end time exactly
             dt = remaining
         self._dt_step = dt
-        self._power_before = self._strays = None   # (nothing of a step cut short carries over)
+        self._power_before = self._power_after = self._strays = None   # (nothing of a step cut short carries over)
         self.scheme.advance(SchemeContext(self, dt))
         energy_due = (self.step_count + 1) % ENERGY_CHECK_INTERVAL == 0
         bad, outside, leaving, sums = self._check_and_next_dt(energy_due)

@@ -66,6 +66,38 @@ def test_update_with_power_is_the_update_and_the_power_of_its_particles(formulat
 
 
 @pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
+def test_increment_matrix_is_the_update(formulation):
+    """``increment_matrix`` (the map a transfer applies in its own pass, pmpm.core.kernels.mls)
+    against D of docs/verification.md section 1 (plane stress) and Lame's constants (plane
+    strain, szz = lam tr de) written out here, and against ``update_stress`` itself.
+    Tolerance: round-off (the update computes c (dexx + nu deyy), the map c dexx + c nu deyy).
+    Shown to fail: with the plane-strain szz row left zero, or mu in place of lam + 2 mu."""
+    m = _mat(formulation)
+    if formulation == "plane_stress":
+        c = E / (1 - NU ** 2)
+        D = c * np.array([[1, NU, 0], [NU, 1, 0], [0, 0, (1 - NU) / 2], [0, 0, 0]])
+    else:
+        lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+        D = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu], [lam, lam, 0]])
+    M = m.increment_matrix()
+    assert M.shape == (4, 3) and M.dtype == np.float64
+    np.testing.assert_allclose(M, D, rtol=1e-14, atol=0)
+    de = np.random.default_rng(4).normal(scale=1e-4, size=(50, 3))
+    stress = np.zeros((50, 4))
+    m.update_stress(stress, de, {}, np.zeros(50, np.int32), -1)
+    np.testing.assert_allclose(de @ M.T, stress, rtol=1e-13, atol=1e-13 * np.abs(stress).max())
+
+
+def test_only_a_linear_law_hands_a_matrix():
+    """The plastic and hyperelastic models hand no map (the solver runs their update)."""
+    table = {"E": E, "nu": NU, "density": RHO}
+    assert make_material({"type": "bilinear_vonmises", **table, "yield_stress": 250e6,
+                          "hardening": 0.01}, "materials.s",
+                         "plane_stress").increment_matrix() is None
+    assert make_material({"type": "neo_hookean", **table}, "materials.s", "plane_strain").increment_matrix() is None
+
+
+@pytest.mark.parametrize("formulation", ["plane_stress", "plane_strain"])
 def test_elastic_energy_density_is_half_sigma_epsilon(formulation):
     m = _mat(formulation)
     de = np.array([[2e-4, -1e-4, 5e-5]])

@@ -10,7 +10,7 @@ from mpi4py import MPI
 from pmpm.build import build_solver
 from pmpm.core import kernels as K
 from pmpm.core.solver import Solver
-from pmpm.physics.materials.linear_elastic import LinearElastic
+from pmpm.physics.materials.linear_elastic import LinearElastic, _update_elastic_power
 from pmpm.core.schemes import make_scheme
 from pmpm.core.kernels.mls import g2p_mls, p2g_mls
 from pmpm.core.kernels.reference_mls import mls_g2p_reference, mls_p2g_reference
@@ -84,7 +84,7 @@ def test_g2p_mls_matches_reference(name):
     de = np.empty((len(v), 3))
     vmax, bad, *tail = g2p_mls(p["x"], v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
                                dx, dt, None, de, None, None, vol, None, None)
-    assert tail == [0.0, 0.0, 0, 0, 0]   # no fused tail asked: none computed
+    assert tail == [0.0, 0.0, 0, 0, 0, 0.0]   # no fused tail asked: none computed
     vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
     np.testing.assert_allclose(v, vp, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(C, Cp, rtol=1e-10, atol=1e-10)
@@ -92,6 +92,40 @@ def test_g2p_mls_matches_reference(name):
     np.testing.assert_allclose(vol, vol_ref, rtol=1e-12)
     np.testing.assert_allclose(dx, dt * vp, rtol=1e-12, atol=1e-14)
     assert vmax == pytest.approx(np.sqrt((vp ** 2).sum(1)).max(), rel=1e-12) and bad == 0
+
+
+@pytest.mark.parametrize("name", ["quadratic", "cubic"])
+@pytest.mark.parametrize("axis", [0, 1])
+def test_mls_block_weights_are_the_shape_modules(name, axis):
+    """The MLS kernels' own block weights (pmpm.core.kernels.mls._axis_weights: no derivatives,
+    the edge test once per block) against pmpm.core.shape's block kernels: blocks
+    of 64 interior coordinates, each with one coordinate where the boundary modification or the
+    clamping must act (0, just inside each edge, on the last node, beyond the grid, 1e20,
+    -1e20, NaN, inf) and one with none; the first nodes exactly, the weights to round-off.
+    Shown to fail: with the edge test ``c < 0`` instead
+    of ``c < 1`` the block with a support reaching node -1 keeps the plain weights."""
+    from pmpm.core.kernels.mls import _axis_weights
+    from pmpm.core.shape import block_weights
+    order = ORDER[name]
+    K = order + 1
+    n = CELLS[axis]
+    rng = np.random.default_rng(12)
+    special = [None, 0.0, 0.3, 0.99, 1.2, n - 0.3, n - 1.2, n - 0.6, float(n), n + 0.7, -0.4,
+               1e20, -1e20, np.nan, np.inf]
+    for value in special:
+        s = rng.uniform(2.0, n - 2.0, 64)
+        if value is not None:
+            s[17] = value
+        x = np.zeros((64, 2))
+        x[:, axis] = ORIGIN[axis] + s * H
+        start, W = np.full(64, -7, np.int64), np.full((2 * K, 64), np.nan)
+        _axis_weights(x, 0, 64, axis, ORIGIN[axis], 1 / H, n, K, start, W)
+        ref_start, ref_W = np.empty(64, np.int64), np.empty((2 * K, 64))
+        block_weights(SHAPE_TAGS[name], (x[:, axis] - ORIGIN[axis]) * (1 / H), None, 64, n, ref_start, ref_W)
+        np.testing.assert_array_equal(start, ref_start, err_msg=f"coordinate {value}")
+        # weights (at most 1) within 2 ulp of 1: the compiler may contract the polynomials'
+        # multiply-adds (FMA) in one and not the other; the first nodes exactly
+        np.testing.assert_allclose(W[:K], ref_W[:K], rtol=0, atol=4.5e-16, err_msg=f"coordinate {value}")
 
 
 @pytest.mark.parametrize("name", ["quadratic", "cubic"])
@@ -153,7 +187,7 @@ def test_g2p_mls_fused_tail_matches_reference(name, axis):
     owned = (axis, 3, 5)
     x, v, C, dx, vol = p["x"].copy(), p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
     de = np.empty((len(v), 3))
-    vmax, bad, work, power, outside, leaving, inverted = g2p_mls(
+    vmax, bad, work, power, outside, leaving, inverted, after = g2p_mls(
         x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
         dx, dt, None, de, None, None, vol, None, None, p["m"], g, p["stress"], owned)
     vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
@@ -174,6 +208,92 @@ def test_g2p_mls_fused_tail_matches_reference(name, axis):
     # and the solver's own count of the moved particles agrees with the kernel's
     assert K.count_strays(x, vol, ORIGIN, 1 / H, CELLS[0], CELLS[1], *owned) == (outside, leaving, inverted)
     assert bad == 0 and vmax == pytest.approx(np.sqrt((vp ** 2).sum(1)).max(), rel=1e-12)
+    assert after == 0.0   # no stress map: the stress is not updated here
+
+
+@pytest.mark.parametrize("name", list(ORDER))
+def test_g2p_mls_applies_the_stress_map(name):
+    """With ``stress_map`` (a material's update as one linear map D, (4, 3) row by row) the
+    G2P adds D de_p to every particle's stress (szz included) and returns, besides the first
+    half of the internal work with the stress before (V_new sigma_old : de), the second half
+    V_new sigma_new : de, against the NumPy twin's de and volume and those sums written here.
+    D is a full random matrix (every entry reaches the stress). Tolerances: the twins' above;
+    the sums are of ~300 terms of order one. Shown to fail: with the szz row not applied, and
+    with the second half summed with the stress before the increment."""
+    p = _particles()
+    G = _grid()
+    G[..., 1:3] = np.random.default_rng(5).normal(size=G[..., 1:3].shape)
+    vel = G[..., 1:3].copy()
+    dt = 0.01
+    D = np.random.default_rng(9).normal(size=(4, 3)) * 50.0
+    owned = (0, 0, CELLS[0])
+    x, v, C, dx, vol = p["x"].copy(), p["v"].copy(), p["C"].copy(), np.empty_like(p["v"]), p["vol"].copy()
+    de = np.empty((len(v), 3))
+    stress = p["stress"].copy()
+    vmax, bad, work, power, outside, leaving, inverted, after = g2p_mls(
+        x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name],
+        dx, dt, None, de, None, None, vol, None, None, p["m"], None, stress, owned, tuple(D.ravel()))
+    vp, Cp, de_ref, vol_ref = mls_g2p_reference(ORDER[name], p["x"], p["vol"], vel, dt, ORIGIN, H, CELLS)
+    np.testing.assert_allclose(de, de_ref, rtol=1e-10, atol=1e-12)
+    new = p["stress"] + de_ref @ D.T
+    assert np.abs(de_ref @ D.T).min(axis=0).max() > 0 and np.abs(de_ref @ D.T)[:, 3].max() > 1e-3
+    np.testing.assert_allclose(stress, new, rtol=1e-10, atol=1e-10)
+    assert power == pytest.approx(np.sum(vol_ref * np.sum(p["stress"][:, :3] * de_ref, axis=1)), rel=1e-10)
+    assert after == pytest.approx(np.sum(vol_ref * np.sum(new[:, :3] * de_ref, axis=1)), rel=1e-10)
+    assert abs(after - power) > 1e-3 * abs(power)   # the two halves differ: each is checked
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_g2p_mls_counts_strays_block_by_block(axis):
+    """The fused G2P recounts a block's strays one by one only where a particle of the block is
+    not settled (pmpm.core.kernels.mls._settled): 640 particles at rest (zero grid velocities)
+    in the owned columns [3, 5) of ``axis``, and in four blocks of 64 one particle each exactly
+    on the limits: at column 5 (leaving), 1e-12 cells below column 3 (leaving), exactly on
+    column 3 (not leaving), and one with a negative volume (inverted); the other six blocks
+    settled. The counts against the solver's own pass (pmpm.core.kernels.locate.count_strays,
+    floor and integer comparisons). Shown to fail: with ``s <= c1`` in _settled the particle on
+    column 5 is not counted."""
+    rng = np.random.default_rng(11)
+    n = 640
+    s = np.empty((n, 2))
+    s[:, axis] = rng.uniform(3.2, 4.8, n)
+    s[:, 1 - axis] = rng.uniform(1.5, 4.5, n)
+    vol = rng.uniform(0.1, 0.3, n)
+    s[70, axis] = 5.0
+    s[200, axis] = 3.0 - 1e-12
+    s[330, axis] = 3.0
+    vol[460] = -0.1
+    x = ORIGIN + s * H
+    G = _grid()
+    v, C, de = np.zeros((n, 2)), np.zeros((n, 4)), np.empty((n, 3))
+    out = g2p_mls(x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS["quadratic"], None, 0.01,
+                  None, de, None, None, vol, None, None, np.ones(n), None, None, (axis, 3, 5))
+    assert out[4:7] == K.count_strays(x, vol, ORIGIN, 1 / H, CELLS[0], CELLS[1], axis, 3, 5) == (0, 2, 1)
+
+
+@pytest.mark.parametrize("name", list(ORDER))
+def test_g2p_mls_without_the_moves_and_increments_arrays(name):
+    """With the move and the stress map folded in, ``dx`` and ``de`` may be None (the scheme
+    leaves them out where nothing reads them after the pass): every other output is the same
+    to the bit as with the arrays (the same expressions, from registers), under gravity (the
+    body force's work over the move). Shown to fail: with the folded move taking dt v_y along x."""
+    p = _particles()
+    G = _grid()
+    G[..., 1:3] = np.random.default_rng(5).normal(size=G[..., 1:3].shape)
+    D = tuple(np.random.default_rng(9).normal(size=12) * 50.0)
+    g = np.array([0.3, -9.81])
+    runs = []
+    for keep in (True, False):
+        x, v, C, vol, stress = (p[k].copy() for k in ("x", "v", "C", "vol", "stress"))
+        dx = np.empty_like(v) if keep else None
+        de = np.empty((len(v), 3)) if keep else None
+        out = g2p_mls(x, v, C, G, 0, 0, ORIGIN, 1 / H, CELLS[0], CELLS[1], SHAPE_TAGS[name], dx, 0.08, None, de,
+                      None, None, vol, None, None, p["m"], g, stress, (1, 2, 5), D)
+        runs.append((out, x, v, C, vol, stress))
+    (out_a, *arrays_a), (out_b, *arrays_b) = runs
+    assert out_a == out_b and out_a[2] != 0.0
+    for a, b in zip(arrays_a, arrays_b):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("shape", ["quadratic", "cubic"])
@@ -202,8 +322,13 @@ def test_mls_step_with_the_fused_tail_is_the_step_without(shape, monkeypatch):
         for _ in range(60):
             s.step()
         return s
+    updates = []
+    monkeypatch.setattr(LinearElastic, "update_stress_power",
+                        lambda self, *a: updates.append(1) or _update_elastic_power(*a[:3], self.params,
+                                                                                   self.plane_strain, *a[4:]))
     fused = run()
-    assert fused.tail_fusable and fused.impulse_fusable
+    assert fused.tail_fusable and fused.impulse_fusable and fused._stress_map is not None
+    assert not updates   # the G2P applied the elastic map: the material's pass did not run
     monkeypatch.setattr(Solver, "tail_fusable", property(lambda self: False))
     monkeypatch.setattr(Solver, "impulse_fusable", property(lambda self: False))
     monkeypatch.setattr(LinearElastic, "sums_power", False)   # the second work half in its own pass too
@@ -214,6 +339,42 @@ def test_mls_step_with_the_fused_tail_is_the_step_without(shape, monkeypatch):
     assert abs(apart.external_work) > 0 and abs(apart.internal_work) > 0
     assert fused.external_work == pytest.approx(apart.external_work, rel=1e-12)
     assert fused.internal_work == pytest.approx(apart.internal_work, rel=1e-12)
+
+
+@pytest.mark.parametrize("loads", ["forces", "rayleigh"])
+def test_mls_step_keeps_the_arrays_its_effects_read(loads, monkeypatch):
+    """The fused G2P leaves out the moves (``dx``) and increments (``de``) only where nothing
+    reads them after it: a point load's work reads the moves (``after_move``), Rayleigh
+    damping's viscous stress the increments (``after_stress_update``). Against the same step
+    with every fusion off (tail_fusable, impulse_fusable False), 40 steps of the bar with the
+    point load on its free end or Rayleigh damping: the state, the works and the damping's
+    work agree to round-off (tolerance as in the test above). Shown to fail: with the moves
+    or the increments left out regardless (the last two flags of Solver.tail_arguments
+    False), the external work (point load) or the viscous damping work (Rayleigh) differ."""
+    def run():
+        data = _bar_data("quadratic", v0=0.05)
+        data["solver"]["mass_cutoff"] = 0.0
+        h = L_BAR / 50
+        data["loads"] = ({"forces": [{"lower": [L_BAR - h, 0.0], "upper": [L_BAR, h], "force": [0.05, 0.0]}]}
+                         if loads == "forces" else {"damping": {"ratio": 0.05, "periods": [PERIOD, PERIOD / 3]}})
+        s = build_solver(parse_scene(data, "bar.toml"), MPI.COMM_SELF)
+        for _ in range(40):
+            s.step()
+        return s
+    fused = run()
+    assert fused.tail_fusable and fused._stress_map is not None
+    assert fused.tail_arguments()[-2:] == ((True, False) if loads == "forces" else (False, True))
+    monkeypatch.setattr(Solver, "tail_fusable", property(lambda self: False))
+    monkeypatch.setattr(Solver, "impulse_fusable", property(lambda self: False))
+    apart = run()
+    for name in ("x", "v", "stress"):
+        ref = apart.particles[name]
+        np.testing.assert_allclose(fused.particles[name], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    ef, ea = fused.energies(), apart.energies()
+    for key in ("external_work", "internal_work", "viscous_damping_work"):
+        if key in ea:
+            assert ef[key] == pytest.approx(ea[key], rel=1e-10, abs=1e-12 * abs(ea["internal_work"]))
+    assert abs(ea["external_work" if loads == "forces" else "viscous_damping_work"]) > 0
 
 
 def _spinning_block(scheme, shape, transfer="flip"):

@@ -117,13 +117,15 @@ def affine_matrix(bxx, bxy, byx, byy, dxx, dyy, dxy, scale):
 @nb.njit(cache=True, inline="always")
 def store_velocity_update(p, v, C, dx, dt, vx, vy, cxx, cxy, cyx, cyy, vmax2, bad):
     """Particle p's new velocity and affine matrix into ``v`` and ``C``, its move dt v into
-    ``dx``; returns the running largest squared speed and count of non-finite particles."""
+    ``dx`` (None: not kept, the caller moves the particle itself); returns the running largest
+    squared speed and count of non-finite particles."""
     C[p, 0] = cxx
     C[p, 1] = cxy
     C[p, 2] = cyx
     C[p, 3] = cyy
-    dx[p, 0] = dt * vx
-    dx[p, 1] = dt * vy
+    if dx is not None:
+        dx[p, 0] = dt * vx
+        dx[p, 1] = dt * vy
     v[p, 0] = vx
     v[p, 1] = vy
     vmax2, bad = speed_check(vx, vy, vmax2, bad)

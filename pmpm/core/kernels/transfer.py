@@ -57,7 +57,8 @@ def polar_angle(fxx, fxy, fyx, fyy):
 @nb.njit(cache=True, inline="always")
 def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq):
     """Particle p's strain increment c L (c = dt / h, L the velocity gradient sums in cell
-    units) into ``de``, its spin into ``dw`` (not None), ``strain`` (not None) and volume.
+    units) into ``de`` (not None: a caller that keeps the increment in registers leaves it
+    out), its spin into ``dw`` (not None), ``strain`` (not None) and volume.
 
     With ``F`` (N, 5: Fxx, Fxy, Fyx, Fyy, Fzz) not None the deformation gradient is advanced
     by the same velocity gradient, F <- (I + dt L) F (Fzz is the material's: plane stress
@@ -69,9 +70,10 @@ def strain_increment(p, c, lxx, lxy, lyx, lyy, de, dw, strain, vol, F, vol0, dq)
     dexx = c * lxx
     deyy = c * lyy
     dgxy = c * (lxy + lyx)
-    de[p, 0] = dexx
-    de[p, 1] = deyy
-    de[p, 2] = dgxy
+    if de is not None:
+        de[p, 0] = dexx
+        de[p, 1] = deyy
+        de[p, 2] = dgxy
     if dw is not None:
         dw[p] = 0.5 * c * (lyx - lxy)
     if strain is not None:

@@ -181,6 +181,16 @@ class Material:
     #: True when ``update_stress_power`` sums the stress power in the update's own pass
     sums_power = False
 
+    def increment_matrix(self):
+        """The stress update as one constant linear map, for a model whose update is one:
+        the (4, 3) float64 matrix D with d(sxx, syy, sxy, szz) = D d(exx, eyy, gxy), the same
+        for every particle at every step (no state, no dependence on the stress or on F). A
+        transfer may then apply it in its own pass over the particles (the MLS scheme's G2P,
+        pmpm.core.kernels.mls.g2p_mls, as Hu et al.'s G2P does), where the core needs a number
+        and no law. None (this default) for every other model: the solver calls
+        ``update_stress``."""
+        return None
+
     def update_stress_power(self, stress, de, vol, state, mat_ids, which):
         """``update_stress`` that also returns sum_p V_p sigma_p : de_p (``vol`` (N,)) over the
         particles it updated, with their new stress: the second half of the step's trapezoid

@@ -1,5 +1,6 @@
 """Linear elastic material, incremental: d_sigma = D d_eps (paper eq. 6)."""
 import numba as nb
+import numpy as np
 
 from pmpm.physics.materials.base import Material
 
@@ -87,6 +88,19 @@ class LinearElastic(Material):
 
     def update_stress_power(self, stress, de, vol, state, mat_ids, which):
         return _update_elastic_power(stress, de, vol, self.params, self.plane_strain, mat_ids, which)
+
+    def increment_matrix(self):
+        """``elastic_increment`` as the (4, 3) matrix of its linear map (rows sxx, syy, sxy,
+        szz; szz's row is zero in plane stress)."""
+        if self.plane_strain:
+            lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
+            mu = self.E / (2 * (1 + self.nu))
+            rows = [[lam + 2 * mu, lam, 0.0], [lam, lam + 2 * mu, 0.0], [0.0, 0.0, mu], [lam, lam, 0.0]]
+        else:
+            c = self.E / (1 - self.nu * self.nu)
+            rows = [[c, c * self.nu, 0.0], [c * self.nu, c, 0.0], [0.0, 0.0, c * 0.5 * (1 - self.nu)],
+                    [0.0, 0.0, 0.0]]
+        return np.array(rows, dtype=np.float64)
 
     def tangent(self, stress0, state0, stress1, state1, de, D, mat_ids, which):
         """The elastic matrix (the update is linear: its tangent is exact)."""
