@@ -140,13 +140,18 @@ def test_displacement_control_converges_quadratically():
     assert run.solver.scheme.stats["halvings"] == 0
 
 
-def test_portal_static_pushover_initial_stiffness():
+@pytest.mark.parametrize("edge_mass_ratio, tolerance", [(0.0, 0.02), (0.01, 0.01)])
+def test_portal_static_pushover_initial_stiffness(edge_mass_ratio, tolerance):
     """cases/portal_pushover.toml's elastic frame pushed 20 mm in 4 static steps at 0.05 m cells
     (the resolution of the dynamic push's CI test): the push force equals the base shear at
     every step (equilibrium, 1e-6 asked), and base shear over the joint's drift (least squares)
     is the plane-stress FE model's P / static drift within 2 %, the tolerance of the dynamic
     push's test against the same model (tests/verification/test_pushover.py; the MPM at 0.05 m
-    is within 0.8 % of it in static drift, docs/portal_frame.md; 1.5 % measured here)."""
+    is within 0.8 % of it in static drift, docs/portal_frame.md; 1.5 % measured here). With the
+    light edge nodes tied to their neighbours (edge_mass_ratio = 0.01, docs/implicit.md "The
+    points as the quadrature of the strips") within the issue's 1 % (issue 37: the static
+    pushover's initial stiffness within 1 % of the dynamic one's, which is 0.5 % above the FE
+    model's)."""
     import os
     import sys
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "verification"))
@@ -154,7 +159,10 @@ def test_portal_static_pushover_initial_stiffness():
     from pmpm.benchmarks.implicit_static import portal_pushover_data
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     elastic = {"type": "linear_elastic", "E": 207e9, "nu": 0.3, "density": 7850.0}
-    r = pmpm.run(portal_pushover_data(0.05, 0.02, 4, elastic, root=root), dataframes=False)
+    data = portal_pushover_data(0.05, 0.02, 4, elastic, root=root)
+    if edge_mass_ratio:
+        data["solver"]["implicit"] = {"edge_mass_ratio": edge_mass_ratio}
+    r = pmpm.run(data, dataframes=False)
     R = r.reactions
     V = -(np.asarray(R["left_base"]["Rx"]) + np.asarray(R["right_base"]["Rx"]))[1:]
     assert np.allclose(np.asarray(R["push"]["Rx"])[1:], V, rtol=1e-6, atol=0)
@@ -162,4 +170,4 @@ def test_portal_static_pushover_initial_stiffness():
     assert u[-1] == pytest.approx(0.02, rel=0.01)   # the joint follows the pushed node row
     drifts = [fem.frame_fe(0.2, level).static()[1] for level in (0, 1, 2)]
     k_fe = fem.read_scene().load[0] / fem.richardson(drifts)[0]
-    assert np.dot(u, V) / np.dot(u, u) == pytest.approx(k_fe, rel=0.02)
+    assert np.dot(u, V) / np.dot(u, u) == pytest.approx(k_fe, rel=tolerance)
