@@ -11,7 +11,7 @@ the scene by a sub-table of the material::
     length = 0.01              # l_c, m: width of the crack band (default: band_cells x the cell size)
     band_cells = 1.5           # or the band's width in cells (default 1; not with length)
     characteristic_length = 0.004   # l*, m: the criterion averaged over l* (default: at each point)
-    band_lstar = 0.45          # the band's least width in l* (needs characteristic_length; not with
+    band_lstar = 0.40          # the band's least width in l* (needs characteristic_length; not with
                                # length): l_c = max(band_cells x h, band_lstar x l*)
 
 Damage (docs/fracture.md has the sources and the choice of model)
