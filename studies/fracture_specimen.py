@@ -58,7 +58,7 @@ BAND_CELLS = 1.3
 
 #: the crack band's least width in units of l* (``band_lstar``): once the grids resolve l* the
 #: band's width follows l*, not the cell. Measured at 2, 1.5 and 1 mm with l* = 6 mm (docs/fracture.md,
-#: "The release length once l* is resolved"): the failed band 2.92, 2.72, 2.52 mm (mean 0.45 l*),
+#: "The release length once l* is resolved"): the failed band 2.92, 2.77, 2.52 mm (mean 0.46 l*),
 #: the fully released band within it 2.08, 2.39, 1.96 mm (mean 0.36 l*); the band that dissipates
 #: lies between the two (a failed point on the flank stops releasing when the crack opens beside
 #: it), so l_c = max(BAND_CELLS h, BAND_LSTAR l*) with the midpoint, 0.40 l* (+- 0.05 l*, 0.3 mm)
