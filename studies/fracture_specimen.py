@@ -13,8 +13,8 @@ size h (mm; the MPM cell and the FE element edge) the study prints
 * pmpm's refinement (second table): the displacement at initiation and its change between
   sizes, and the fracture energy dissipated by ``--end-time`` (the crack has then run through
   the ligament: the force left is printed) over G_f times the ligament's area, which the
-  Hillerborg regularisation (l_c = band_cells x h, :data:`BAND_CELLS`) should keep independent
-  of h, and the crack band's width in cells;
+  Hillerborg regularisation (l_c = max(band_cells x h, band_lstar x l*): :data:`BAND_CELLS`,
+  :data:`BAND_LSTAR`) should keep independent of h, and the crack band's width in cells;
 * the force-displacement curves to initiation: the held face's reaction averaged over windows
   of ``--window`` seconds (the elastic waves of the sudden pull ring with a period of 2 L / c,
   about 40 us: the window averages them out the same way in both), its largest difference
@@ -39,6 +39,7 @@ import time
 import numpy as np
 
 from pmpm.api import run as pmpm_run
+from pmpm.physics.materials import fracture as fracture_option
 from studies import verification_models
 
 __all__ = ["fe_module", "scene", "mpm", "fe", "compare", "window_means", "main"]
@@ -54,6 +55,14 @@ def fe_module():
 #: the width the crack runs with in this specimen with cubic B-splines and the nonlocal
 #: criterion, measured by this study (the table's "band width" column; docs/fracture.md)
 BAND_CELLS = 1.3
+
+#: the crack band's least width in units of l* (``band_lstar``): once the grids resolve l* the
+#: band's width follows l*, not the cell. Measured at 2, 1.5 and 1 mm with l* = 6 mm (docs/fracture.md,
+#: "The release length once l* is resolved"): the failed band 2.92, 2.77, 2.52 mm (mean 0.46 l*),
+#: the fully released band within it 2.08, 2.39, 1.96 mm (mean 0.36 l*); the band that dissipates
+#: lies between the two (a failed point on the flank stops releasing when the crack opens beside
+#: it), so l_c = max(BAND_CELLS h, BAND_LSTAR l*) with the midpoint, 0.40 l* (+- 0.05 l*, 0.3 mm)
+BAND_LSTAR = 0.40
 
 #: pmpm's end time (s): with the specimen's l* = 6 mm initiation is near 2.0 ms and the crack has
 #: crossed the ligament by 2.7 ms (the table's force at the end, a few % of the peak)
@@ -71,6 +80,9 @@ def fracture_table(sp):
     band = sp.get("band_cells", BAND_CELLS)
     if band:
         table["band_cells"] = band
+    lstar_band = sp.get("band_lstar", BAND_LSTAR)
+    if lstar_band and band and sp.get("characteristic_length"):
+        table["band_lstar"] = lstar_band
     return table
 
 
@@ -96,7 +108,7 @@ def scene(h, end_time=2.0e-3, sp=None, history_interval=1.0e-5):
             {"name": "held", "type": "fixed", "body": "plate", "face": "left", "reaction": True},
             {"name": "pulled", "type": "velocity", "velocity": [sp["pull"], 0.0], "body": "plate", "face": "right"}],
         "solver": {"end_time": end_time, "cfl": 0.5},
-        "output": {"interval": end_time, "history_interval": history_interval, "fields": ["x", "damage"]},
+        "output": {"interval": end_time, "history_interval": history_interval, "fields": ["x", "damage", "crack_strain"]},
     }
 
 
@@ -136,14 +148,21 @@ def _mpm_figures(a, h, sp):
     r = a["result"]
     ligament = sp["width"] - 2 * sp["radius"]
     failed = r.frames["damage"][-1] >= 1.0
+    crack = np.asarray(r.frames["crack_strain"][-1])
+    released = failed & (crack[:, 0] >= crack[:, 1])
     work = float(r.energies["fracture_work"][-1])
+    lc = fracture_option.band_length(fracture_option.read_fracture(fracture_table(sp), "fracture"), h)
     return {"h_mm": h * 1e3, "u_init_mpm_mm": sp["pull"] * a["initiation"] * 1e3 if a["initiation"] else math.nan,
             "fracture_work_J": work,
             "fracture_work_over_GfA": work / (sp["fracture_energy"] * ligament * sp["thickness"]),
             "failed_points": int(failed.sum()),
             # the crack band's mean width in cells: the failed particles' area (h^2 / 4 each at
             # 2 particles per cell) over the ligament's length
-            "band_cells": float(failed.sum()) * (h * h / 4) / (ligament * h), "wall_mpm_s": a["wall"]}
+            "band_cells": float(failed.sum()) * (h * h / 4) / (ligament * h),
+            # the same of the fully released particles (w = 1), and the run's release length
+            "released_band_cells": float(released.sum()) * (h * h / 4) / (ligament * h),
+            "band_mm": float(failed.sum()) * (h * h / 4) / ligament * 1e3, "l_c_mm": lc * 1e3,
+            "wall_mpm_s": a["wall"]}
 
 
 def compare(h, window=1.0e-4, end_time=END_TIME, sp=None, progress=None):
@@ -265,12 +284,17 @@ def main(argv=None):
                          "the nonlocal criterion")
     ap.add_argument("--characteristic-length", type=float, metavar="MM",
                     help="the nonlocal criterion's l* (mm) instead of the specimen's (6 mm)")
+    ap.add_argument("--band-lstar", type=float, metavar="C",
+                    help="the release length's least width in l* (default %g; 0: l_c = band_cells x h alone, "
+                         "as before)" % BAND_LSTAR)
     ap.add_argument("--pmpm-only", action="store_true",
                     help="only pmpm's figures at each size (initiation, fracture work, band): no FE model, no tables")
     args = ap.parse_args(argv)
     sp = dict(fe_module().SPECIMEN)
     if args.characteristic_length:
         sp["characteristic_length"] = args.characteristic_length * 1e-3
+    if args.band_lstar is not None:
+        sp["band_lstar"] = args.band_lstar
     if args.local:
         sp["characteristic_length"] = None
         sp["band_cells"] = None

@@ -4,7 +4,9 @@ key, nothing written (the pattern of tests/unit/test_cli_errors.py).
 Planted bugs each case was seen to catch: the ``eta`` / ``fracture_energy`` / ``length`` checks
 of pmpm.physics.materials.fracture._positive relaxed to ``< 0`` (the zero cases pass silently,
 then the run writes its output folder); Material.read_params not refusing ``fracture`` (the
-elastic and neo-Hookean cases then fail on "unknown key" without naming fracture support).
+elastic and neo-Hookean cases then fail on "unknown key" without naming fracture support);
+``band_lstar``'s check for a characteristic length removed and its bound relaxed to 10 (the
+without-l* case then dies in the build with a traceback, the above-one case runs).
 """
 import subprocess
 import sys
@@ -77,6 +79,15 @@ CASES = {
                         "materials.steel.fracture.band_cells: must be > 0 (got 0)"),
     "band-cells-and-length": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\nband_cells = 1.5\nlength = 0.01"),
                               "materials.steel.fracture.band_cells: give either length"),
+    "band-lstar-without-lstar": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\nband_lstar = 0.45"),
+                                 "materials.steel.fracture.band_lstar: needs characteristic_length"),
+    "band-lstar-and-length": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\ncharacteristic_length = 0.006"
+                                    "\nband_lstar = 0.45\nlength = 0.01"),
+                              "materials.steel.fracture.band_lstar: give either length"),
+    "zero-band-lstar": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\ncharacteristic_length = 0.006"
+                              "\nband_lstar = 0"), "materials.steel.fracture.band_lstar: must be > 0 (got 0)"),
+    "band-lstar-above-one": (_with("fracture_energy = 1e5", "fracture_energy = 1e5\ncharacteristic_length = 0.006"
+                                   "\nband_lstar = 1.5"), "materials.steel.fracture.band_lstar: must be <= 1"),
     "text-eta": (_with("eta = 2.6", 'eta = "2.6"'), "materials.steel.fracture.eta: must be a finite number"),
     "unknown-key": (_with("eta = 2.6", "eta = 2.6\nalpha = 2.6"), "materials.steel.fracture.alpha: unknown key"),
     "not-a-table": (lambda t: t.replace("[materials.steel.fracture]\nmodel = \"void_growth\"\neta = 2.6\n"

@@ -171,7 +171,13 @@ def test_single_point_dissipates_gf_over_lc():
     kappa / kappa_u) along the whole release, the energy balance closes at every increment, and
     the fracture work ends at G_f / l_c per unit volume."""
     pt, d = _fail_in_uniaxial_tension("bilinear_vonmises")
-    g = GF / LENGTH
+    _release_dissipates_gf_over_lc(pt, GF / LENGTH)
+
+
+def _release_dissipates_gf_over_lc(pt, g):
+    """The release of a point just failed in uniaxial tension on the yield surface (no
+    hardening): the line sigma_y (1 - kappa / kappa_u), the balance at every increment, and
+    G_f / l_c = ``g`` per unit volume at the end."""
     assert pt.stress[0, 0] == pytest.approx(SY, rel=1e-12)   # failed on the yield surface
     u_f = 0.5 * SY ** 2 / E
     kappa_u = 2 * (g - u_f) / SY
@@ -202,6 +208,37 @@ def test_single_point_dissipates_gf_over_lc():
     vol_u = vol_f * (1 + kappa_u / 2) ** 1.02   # the release's end, a hair past (increments)
     last = 0.5 * SY * step * vol_u
     assert g * vol_f - last <= pt.joules("fracture_work") <= g * vol_u + last
+
+
+LSTAR = 0.02   # m: the nonlocal criterion's l*, for the release length's l* bound
+BAND_CELLS, BAND_LSTAR = 1.3, 0.45
+
+
+# planted bugs: band_length ignoring band_lstar (l_c = band_cells h, the code before it) -> the
+# fine cell fails (G_f / 5.2 mm against G_f / 9 mm); min instead of max -> the coarse one fails
+@pytest.mark.parametrize("h, lc", [(0.004, BAND_LSTAR * LSTAR), (0.01, BAND_CELLS * 0.01)],
+                         ids=["l*-bound", "cell-bound"])
+def test_release_length_is_the_band_in_cells_or_in_lstar(h, lc):
+    """With ``band_lstar`` the release length is l_c = max(band_cells h, band_lstar l*): on a
+    cell of 4 mm the band's l* bound (9 mm > 5.2 mm), on 10 mm the cells' (13 mm > 9 mm). A
+    point failed by the nonlocal criterion (its own index and its average at 1) in uniaxial
+    tension then dissipates G_f / l_c per unit volume (the closed form of the release)."""
+    table = dict(type="bilinear_vonmises", E=E, nu=NU, density=7850.0, yield_stress=SY, hardening=0.0,
+                 fracture=dict(model="void_growth", eta=ETA, fracture_energy=GF, characteristic_length=LSTAR,
+                               band_cells=BAND_CELLS, band_lstar=BAND_LSTAR))
+    mat = make_material(table, KEY, "plane_stress")
+    mat.use_cell_size(h)
+    mat.work_in_joules = False   # a lone point has no volume: the per-volume identity (base.py)
+    assert mat.fracture_length == pytest.approx(lc, rel=1e-14)
+    pt = Point(mat)
+    d = 1.2 * ETA * math.exp(-0.5) / 300
+    while pt.get("vgm_index") < 1.0:
+        pt.step_ratio(d, 0.0)
+        assert pt.get("damage") < 1.0   # the nonlocal criterion fails a point in fail_where only
+    fp, damage, _, crack, eff = mat.fracture_arguments(pt.state)
+    index = pt.state["vgm_index"]
+    assert F.fail_where(index.copy(), index, pt.ids, -1, pt.stress, eff, crack, damage, fp) == 1
+    _release_dissipates_gf_over_lc(pt, GF / lc)
 
 
 # planted bug: release() scaling the compressive principal value by (1 - w) too -> the

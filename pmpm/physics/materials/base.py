@@ -288,8 +288,8 @@ class KinematicHardening(Material):
 
     def use_cell_size(self, h):
         self.work_in_joules = True   # called by pmpm.build for every material of a run
-        if self.fracture is not None and self.fracture["length"] is None:
-            self.fracture_length = self.fracture.get("band_cells", 1.0) * float(h)
+        if self.fracture is not None:
+            self.fracture_length = fracture_option.band_length(self.fracture, h)
 
     def update_stress(self, stress, de, state, mat_ids, which):
         """The material's plain kernel (:meth:`plastic_update`), between the fracture option's

@@ -11,6 +11,8 @@ the scene by a sub-table of the material::
     length = 0.01              # l_c, m: width of the crack band (default: band_cells x the cell size)
     band_cells = 1.5           # or the band's width in cells (default 1; not with length)
     characteristic_length = 0.004   # l*, m: the criterion averaged over l* (default: at each point)
+    band_lstar = 0.40          # the band's least width in l* (needs characteristic_length; not with
+                               # length): l_c = max(band_cells x h, band_lstar x l*)
 
 Damage (docs/fracture.md has the sources and the choice of model)
     dD = d(eps_p_eq) / eps_f(T),  eps_f(T) = eta exp(-1.5 T),  T = sigma_m / sigma_eq
@@ -65,7 +67,7 @@ from pmpm.errors import ConfigError
 
 __all__ = ["FractureModel", "VoidGrowth", "FRACTURE_MODELS", "read_fracture", "FRACTURE_FIELDS",
            "triaxiality", "fracture_strain", "release", "begin_point", "elastic_point",
-           "prelude", "epilogue", "fail_where", "fracture_fields", "NONLOCAL_FIELDS",
+           "prelude", "epilogue", "fail_where", "fracture_fields", "band_length", "NONLOCAL_FIELDS",
            "fracture_point_reference", "triaxiality_reference", "CUTOFF"]
 
 #: the energy failed material points dissipate (J): the field ``fracture_work`` (J/m^3) over the
@@ -158,9 +160,34 @@ def read_fracture(table, key):
     if band is not None and settings["length"] is not None:
         raise ConfigError(f"{key}.band_cells", "give either length (m) or band_cells (cells), not both")
     settings["band_cells"] = 1.0 if band is None else band
+    # the band's least width in units of l*: once the grid resolves l* the failed band's width
+    # follows l*, not the cell (docs/fracture.md, "The release length once l* is resolved")
+    lstar_band = _positive(table, key, "band_lstar", required=False)
+    if lstar_band is not None:
+        if settings["characteristic_length"] is None:
+            raise ConfigError(f"{key}.band_lstar", "needs characteristic_length (the l* it is a fraction of)")
+        if settings["length"] is not None:
+            raise ConfigError(f"{key}.band_lstar", "give either length (m) or band_lstar (with band_cells), not both")
+        if lstar_band > 1.0:
+            raise ConfigError(f"{key}.band_lstar", f"must be <= 1: a band wider than the criterion's l* "
+                                                   f"(got {lstar_band:g})")
+    settings["band_lstar"] = lstar_band
     if table:
         raise ConfigError(f"{key}.{sorted(table)[0]}", "unknown key for this fracture model")
     return settings
+
+
+def band_length(settings, h):
+    """The release length l_c of a run whose cell is ``h`` (m): the scene's ``length``, else the
+    crack band's width, max(band_cells x h, band_lstar x l*) (the second only with ``band_lstar``):
+    the band is at least ``band_cells`` cells wide, and at least ``band_lstar`` l* wide once the
+    grid resolves l* (docs/fracture.md)."""
+    if settings.get("length") is not None:
+        return settings["length"]
+    lc = settings.get("band_cells", 1.0) * float(h)
+    if settings.get("band_lstar") is not None:
+        lc = max(lc, settings["band_lstar"] * settings["characteristic_length"])
+    return lc
 
 
 def kernel_params(settings, E, nu, length):
