@@ -127,3 +127,46 @@ def test_kept_only_rescaled_to_the_current_diagonal_is_exact_for_a_diagonal_chan
     plain = np.linalg.solve(P, rhs)
     assert np.abs(plain - ref).max() > 0.1 * np.abs(ref).max()   # (the rescaling is what makes it exact)
     lin.destroy()
+
+
+@pytest.mark.parametrize("left", [(0, 1), (0, 1, 13)])
+def test_kept_only_clamps_the_rows_that_left(left):
+    """newton = "accelerated" after rows left the system (kept_factorisation.clamp_departed):
+    the kept P of the chain's nodes 0..29 serves an operator without the nodes ``left``. The
+    current operator is then P's principal submatrix on the nodes that stayed (the same blocks,
+    the couplings to the departed nodes gone), and the capacitance form of P's solve with the
+    departed unknowns held at zero is its exact inverse: the solve equals a dense solve of the
+    submatrix to round-off. Fails with the clamp left out (P^-1 with zero on the departed rows,
+    what the remapping did before: the stayed node next to a departed one feels it free)."""
+    lin = LinearSolver(MPI.COMM_SELF, {}, kept_only=True)
+    op, P = _chain(list(range(0, 30)))
+    lin.reference_diagonal = np.diag(P).copy()
+    lin.set_operator(*op)
+    stayed = np.array([g for g in range(30) if g not in left])
+    rows = (2 * stayed[:, None] + np.arange(2)).reshape(-1)
+    A = P[np.ix_(rows, rows)]
+    keys = op[-1][rows]
+    assert lin.kept.clamp_departed(keys)
+    lin.refit(keys, np.diag(A).copy())
+    rhs = np.cos(np.arange(len(rows)) + 0.3)
+    x = lin.solve(rhs)
+    ref = np.linalg.solve(A, rhs)
+    assert np.abs(x - ref).max() <= 1e-10 * np.abs(ref).max()
+    assert lin.factorisations == 1
+    # one back-substitution per departed row, once: a second step with the same rows solves
+    # nothing more for the clamp
+    assert len(lin.kept.columns) == 2 * len(left)
+    assert lin.kept.clamp_departed(keys) and len(lin.kept.columns) == 2 * len(left)
+    lin.destroy()
+
+
+def test_kept_only_too_many_departed_rows_refuse_the_kept_factorisation():
+    """More departed rows than the limit: clamp_departed declines (the caller refactors)."""
+    lin = LinearSolver(MPI.COMM_SELF, {}, kept_only=True)
+    op, P = _chain(list(range(0, 30)))
+    lin.reference_diagonal = np.diag(P).copy()
+    lin.set_operator(*op)
+    keys = op[-1][20:]                              # 10 nodes, 20 rows left
+    assert not lin.kept.clamp_departed(keys, limit=19)
+    assert lin.kept.clamp_departed(keys, limit=20)
+    lin.destroy()

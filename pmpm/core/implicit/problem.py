@@ -249,19 +249,18 @@ class GridProblem:
 
     def fit_kept_factorisation(self, u):
         """``newton = "accelerated"``: whether this step can start on the kept factorisation
-        of an earlier tangent. Only where its rows are this step's on every rank (collective):
-        it is then rescaled so that its diagonal is the current one
-        (pmpm.core.implicit.kept_factorisation) and the step assembles no tangent unless the
-        accelerated iteration stalls. Where rows changed (particles crossed cells), a row that
-        left P cannot be dropped from it: in P that node is free, and a node reached by the
-        tail of one particle's spline relaxes that particle's strain (a near-mechanism of
-        P that the current system does not have: on the three-storey frame the first
-        correction then raised the residual three- to tenfold, docs/implicit.md); so the step
+        of an earlier tangent (collective). Its rows are matched to this step's by grid node:
+        rows that left since it was factored are clamped in its solves (a node that only the
+        tail of one particle's spline reached is a near-mechanism of P that the current system
+        does not have: free, it made the first correction raise the residual three- to
+        tenfold on the three-storey frame, docs/implicit.md), new rows get a Jacobi step
+        (pmpm.core.implicit.kept_factorisation). It is rescaled so that its diagonal is the
+        current one, and the step assembles no tangent unless the accelerated iteration
+        stalls. Where too many rows have left (``kept_factorisation.DEPARTED_LIMIT``) the step
         refactors, as ``"modified"`` does."""
         keys = self._row_keys()
         kept = self.linear.kept
-        same = kept.keys is not None and keys.shape == kept.keys.shape and np.array_equal(keys, kept.keys)
-        if self.s.decomp.allreduce_sum(0 if same else 1):
+        if kept.keys is None or not kept.clamp_departed(keys):
             return False
         self.linear.refit(keys, self.kept_diagonal(u))
         self.refits += 1
