@@ -11,8 +11,8 @@ lines: slaved node columns), 0.5 m high, moving with a velocity field that strai
   B-splines' gradients (pmpm.core.kernels.reference.basis_matrix) and the plane-stress elastic
   matrix, and M the step's lumped mass, which is the extended basis's row sum, T^T m with m the
   unfolded lumped masses sum_p m_p N_I(x_p) (also checked: the scheme's folded mass is that);
-* energy: the dissipation the term reports for a step (damping_work + viscous_damping_work) is
-  the work of those damping forces, the trapezoid of the start's and end's, over the step's
+* energy: the dissipation the term reports for a step (viscous_damping_work and damping_work,
+  each) is the work of those damping forces, the trapezoid of the start's and end's, over the step's
   increment: u_exp . (a1 K_0) (V_n + V_n+1) / 2 on the expanded nodal values (the slaved nodes
   included) plus the mass part's u . a0 M (v_n + v_n+1) / 2 on the unknowns (exact: both are
   bilinear in the nodal values; tolerance 1e-10 relative, round-off).
@@ -166,14 +166,14 @@ def test_damping_dissipation_is_the_work_on_the_expanded_velocities(step_problem
     problem.internal_force(U)             # (as the commit: the converged increment evaluated last)
     term.begin(problem)                   # (the start's viscous stress)
     term.commit(s, problem, U)
-    got = (e.damping_work - before[0]) + (e.viscous_damping_work - before[1])
+    got_mass, got_viscous = e.damping_work - before[0], e.viscous_damping_work - before[1]
     d = problem.dofs
     mine = (d.active[..., None] & ~d.held).reshape(-1)
     viscous = 0.5 * (T @ u.reshape(-1)) @ (C_K @ (T @ (problem.v + vel).reshape(-1)))
     mass = 0.5 * a0 * np.sum((np.repeat(m_folded.reshape(-1), 2) * u.reshape(-1) * (problem.v + vel).reshape(-1))[mine])
-    ref = viscous + mass
-    assert abs(viscous) > 1e-3 * abs(ref) and abs(mass) > 1e-3 * abs(ref)   # both parts act
-    assert abs(got - ref) < 1e-10 * (abs(viscous) + abs(mass)), (got, ref)
+    assert abs(viscous) > 0 and abs(mass) > 0   # both parts act (each its own energy term)
+    assert abs(got_viscous - viscous) < 1e-10 * abs(viscous), (got_viscous, viscous)
+    assert abs(got_mass - mass) < 1e-10 * abs(mass), (got_mass, mass)
 
 
 # -- ground motion: a rigid translation ---------------------------------------------------
@@ -190,9 +190,13 @@ def _translated_strip(tmp_path):
     data["loads"]["ground_motion"] = {"file": str(record), "format": "two_column", "direction": "x"}
     data["bodies"][0]["velocity"] = [V, 0.0]
     data["solver"]["end_time"] = STEPS * DT
-    # the base holds the two lowest node rows of the inner columns: the outer columns' light
-    # nodes there are slaved to driven targets
-    data["boundary"][0].update(lower=[-0.12, 0.0], upper=[0.12, 0.05])
+    # a rigid motion is in equilibrium: each step's first residual is round-off already, and
+    # Newton's relative criteria have nothing to measure (1e-8 of round-off is not reached):
+    # opened up here, the step converges after one correction of round-off
+    data["solver"]["implicit"].update(residual_tolerance=0.5, energy_tolerance=0.5)
+    # the base holds the two lowest node rows of the columns with material but the light outer
+    # ones (x = -0.25 and 0.25 at 0.05 m cells): those are slaved there to two driven targets
+    data["boundary"][0].update(lower=[-0.21, 0.0], upper=[0.21, 0.05])
     return data
 
 
@@ -209,9 +213,10 @@ def test_rigid_translation_on_driven_supports_strains_nothing(tmp_path):
         di, dj = DIRECTIONS[code[i, j]]
         targets += [held[i + di, j + dj], held[i + 2 * di, j + 2 * dj]]
     assert len(targets) and any(targets)   # slaved nodes with driven targets
-    x0 = s.particles["x"].copy()
+    start = dict(zip(s.particles["id"].tolist(), s.particles["x"].copy()))
     run.execute()
     p = s.particles
+    x0 = np.array([start[i] for i in p["id"].tolist()])   # (the particles are reordered by the steps)
     shift = V * s.t
     assert s.t == pytest.approx(STEPS * DT)
     assert np.abs(p["x"][:, 0] - x0[:, 0] - shift).max() < 1e-9 * shift
