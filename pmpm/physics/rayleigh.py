@@ -221,11 +221,10 @@ class RayleighImplicit(ImplicitTerm):
         self.sv_start = self.sv = None
 
     def _velocity(self, problem, u):
-        """v_{n+1} of the increment u (Newmark), on the window (the slaved edge nodes' values
-        extrapolated from their targets: Newmark's rule is linear node by node, so this is the
-        rule applied to the expanded u, v_n and a_n)."""
+        """v_{n+1} of the increment u (Newmark), on the window (the slaved edge nodes' values are
+        ``_force``'s to extrapolate)."""
         rule = problem.rule
-        return problem.expand(problem.v + rule.velocity_change(problem.a, rule.acceleration(u, problem.v, problem.a)))
+        return problem.v + rule.velocity_change(problem.a, rule.acceleration(u, problem.v, problem.a))
 
     def _force(self, problem, vel):
         """(-C vel on the nodes, halo-complete; the viscous stress a1 C : d(vel) of the particles).
@@ -239,6 +238,7 @@ class RayleighImplicit(ImplicitTerm):
         s, e = problem.s, self.effect
         p = s.particles
         n = p.n
+        # (Newmark's rule is linear node by node: T v_n+1 is the rule's of T u, T v_n and T a_n)
         vel = problem.expand(vel.copy())
         f, E = np.empty((n, 4)), np.empty((n, 3))
         IK.deformation_increment(problem.x, vel, *problem.geometry, f, E)
