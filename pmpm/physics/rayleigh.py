@@ -41,6 +41,8 @@ elastic matrix, as the explicit step's viscous stress), so K_0 is the elastic st
 the material does. v_{n+1} is linear in the step's displacement increment u (dv / du = gamma /
 (beta dt)), so the term adds gamma / (beta dt) C to the tangent, exactly. Its work over a step is
 the trapezoid u . C (v_n + v_{n+1}) / 2, the rule's own energy balance. No stable-step limit.
+With slaved edge nodes (``[solver.implicit] edge_mass_ratio``) C is the folded system's,
+T^T (a1 K_0) T + a0 M with M the step's (folded) lumped masses (``RayleighImplicit._force``).
 """
 import math
 
