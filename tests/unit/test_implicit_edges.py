@@ -26,8 +26,8 @@ pmpm.core.implicit.edges; docs/implicit.md "The points as the quadrature of the 
 
 Shown to fail on planted bugs (restored): the point's weights left unfolded
 (DisplacementControl.weights halo-summing without the fold) -> the point's move off by
-PLANT_WEIGHTS; the pattern's forces left unfolded (LoadFactorControl.load_vectors without
-``edges``) -> the base shear PLANT_PATTERN off the load factor's; the
+7.3e-5 of it; the pattern's forces left unfolded (LoadFactorControl.load_vectors without
+``edges``) -> the base shear 5.3e-5 off the load factor's; the
 tangent's fold skipped (``fold_tangent`` not called in GridProblem.tangent) -> 21 Newton
 iterations instead of 3 in the strip's step; the residual left unfolded (the fold in
 GridProblem.internal_force removed) -> the base shear 0.025 % off the load; the grid's fields
