@@ -171,6 +171,11 @@ class Effect:
         """The effect's part of the implicit step (pmpm.core.implicit.terms), or None."""
         return None
 
+    #: whether the effect's implicit term folds its forces and tangent onto the slaved edge
+    #: nodes (``[solver.implicit] edge_mass_ratio``, pmpm.core.implicit.edges); an effect with
+    #: a term that does not is refused with that option (pmpm.core.implicit.scheme)
+    implicit_term_folded = False
+
     # -- state and reporting ---------------------------------------------------------------
     def restore(self, s, attrs):
         """After a restart from a checkpoint with ``attrs`` at time ``s.t`` (the energy terms

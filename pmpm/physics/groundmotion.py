@@ -12,6 +12,14 @@ is the ground's, the exact integral of the ground velocity over the step (the re
 piecewise-linear acceleration integrated twice), and whose velocity change and end acceleration,
 which the particles near the supports receive, are the ground's; no effective load -M a_g is
 applied, displacements and velocities are absolute (drifts are differences of points).
+
+With slaved edge nodes (``[solver.implicit] edge_mass_ratio``, pmpm.core.implicit.edges) nothing
+is folded for the term: the driven nodes are held, and a held node is never slaved; a slaved
+node's targets may be driven nodes, and its extrapolated increment, u_o = 2 u_a - u_b, is read
+from the step's whole displacement, held increments included (the residual is evaluated at it,
+and the tangent's columns of held components drop out with their zero corrections), so the
+prescribed motion reaches it. At the commit the supports' velocity change and acceleration are
+written before the expansion (pmpm.core.implicit.scheme), for the same reason.
 """
 import logging
 import os
@@ -225,6 +233,11 @@ class GroundMotion(Effect):
     def implicit_term(self, s):
         """The driven supports' motion in the implicit step (module doc)."""
         return GroundMotionImplicit(self)
+
+    #: with slaved edge nodes (edge_mass_ratio): the driven nodes are held, so never slaved; a
+    #: slaved node's targets may be driven nodes, whose prescribed increments the expansion
+    #: reads from the step's displacement (module doc). The term adds no force of its own.
+    implicit_term_folded = True
 
     def on_window(self, s):
         self.bind(s.window)

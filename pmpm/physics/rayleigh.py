@@ -41,6 +41,8 @@ elastic matrix, as the explicit step's viscous stress), so K_0 is the elastic st
 the material does. v_{n+1} is linear in the step's displacement increment u (dv / du = gamma /
 (beta dt)), so the term adds gamma / (beta dt) C to the tangent, exactly. Its work over a step is
 the trapezoid u . C (v_n + v_{n+1}) / 2, the rule's own energy balance. No stable-step limit.
+With slaved edge nodes (``[solver.implicit] edge_mass_ratio``) C is the folded system's,
+T^T (a1 K_0) T + a0 M with M the step's (folded) lumped masses (``RayleighImplicit._force``).
 """
 import math
 
@@ -170,6 +172,9 @@ class RayleighDamping(Effect):
         """The damping matrix in the implicit step (module doc)."""
         return RayleighImplicit(self, s.materials)
 
+    #: the term's forces and tangent are folded onto slaved edge nodes (RayleighImplicit._force)
+    implicit_term_folded = True
+
     def limit_dt(self, dt, speed, s):
         """The viscous stress shortens the stable step (module doc)."""
         return dt * self.stable_step_factor(speed, s.grid.h, self.undamped_limit)
@@ -218,15 +223,25 @@ class RayleighImplicit(ImplicitTerm):
         self.sv_start = self.sv = None
 
     def _velocity(self, problem, u):
-        """v_{n+1} of the increment u (Newmark), on the window."""
+        """v_{n+1} of the increment u (Newmark), on the window (the slaved edge nodes' values are
+        ``_force``'s to extrapolate)."""
         rule = problem.rule
         return problem.v + rule.velocity_change(problem.a, rule.acceleration(u, problem.v, problem.a))
 
     def _force(self, problem, vel):
-        """(-C vel on the nodes, halo-complete; the viscous stress a1 C : d(vel) of the particles)."""
+        """(-C vel on the nodes, halo-complete; the viscous stress a1 C : d(vel) of the particles).
+
+        With slaved edge nodes (``edge_mass_ratio``, pmpm.core.implicit.edges) C is the folded
+        system's, T^T (a1 K_0) T + a0 M: the particles read the expanded velocities T vel, their
+        viscous forces are folded (T^T) before the halo sum as the internal force is
+        (GridProblem.fold_and_sum), and the mass part is on the step's lumped masses, which
+        are already the folded ones (the inertia's M: the row sums of the extended basis, a
+        diagonal matrix; not T^T M T)."""
         s, e = problem.s, self.effect
         p = s.particles
         n = p.n
+        # (Newmark's rule is linear node by node: T v_n+1 is the rule's of T u, T v_n and T a_n)
+        vel = problem.expand(vel.copy())
         f, E = np.empty((n, 4)), np.empty((n, 3))
         IK.deformation_increment(problem.x, vel, *problem.geometry, f, E)
         rate = np.stack([f[:, 0] - 1.0, f[:, 3] - 1.0, f[:, 1] + f[:, 2]], axis=1)
@@ -235,8 +250,8 @@ class RayleighImplicit(ImplicitTerm):
         sv = e.a1 * np.einsum("prs,ps->pr", self.D, rate)
         F = np.zeros(problem.mass.shape + (2,))
         IK.internal_force(problem.x, problem.vol, sv, self.identity(n), F, *problem.geometry)
-        s.decomp.sum_halo(F)
-        F -= e.a0 * problem.mass[..., None] * vel
+        problem.fold_and_sum(F)
+        F -= e.a0 * problem.mass[..., None] * vel   # (zero on the slaved nodes: no mass of their own)
         return F, sv
 
     def identity(self, n):
@@ -272,9 +287,8 @@ class RayleighImplicit(ImplicitTerm):
         Kb[:, centre, 1, 1] += e.a0 * c * m
         if self.blocks is None or self.blocks.shape != Kb.shape:   # once a step (K_0: start positions)
             n = problem.s.particles.n
-            self.blocks = np.zeros_like(Kb)
-            IK.assemble_blocks(problem.x, problem.vol, np.zeros((n, 3)), self.identity(n), e.a1 * c * self.D,
-                               d.lid, self.blocks, *problem.geometry)
+            # (T^T K_0 T with slaved edge nodes: GridProblem.assemble)
+            self.blocks = problem.assemble(np.zeros((n, 3)), self.identity(n), e.a1 * c * self.D)
         Kb += self.blocks
 
     def commit(self, s, problem, u):

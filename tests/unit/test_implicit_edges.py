@@ -19,10 +19,15 @@ pmpm.core.implicit.edges; docs/implicit.md "The points as the quadrature of the 
   tolerance (1e-6: the folded residual is the problem's), and Newton takes no more iterations
   than without slaved nodes (the folded tangent is the exact derivative).
 
-* Refused (ConfigError naming the key) with Rayleigh damping (a term the fold does not carry)
-  and with a load-factor control.
+* Accepted with Rayleigh damping and ground motion, whose terms are folded
+  (tests/unit/test_implicit_edges_terms.py), and with a load-factor control: under displacement
+  control the strip's face point moves by the displacement asked, to round-off, and the base
+  shear is the load factor times the pattern, to Newton's tolerance.
 
-Shown to fail on planted bugs (restored): either refusal removed -> its test fails; the
+Shown to fail on planted bugs (restored): the point's weights left unfolded
+(DisplacementControl.weights halo-summing without the fold) -> the point's move off by
+7.3e-5 of it; the pattern's forces left unfolded (LoadFactorControl.load_vectors without
+``edges``) -> the base shear 5.3e-5 off the load factor's; the
 tangent's fold skipped (``fold_tangent`` not called in GridProblem.tangent) -> 21 Newton
 iterations instead of 3 in the strip's step; the residual left unfolded (the fold in
 GridProblem.internal_force removed) -> the base shear 0.025 % off the load; the grid's fields
@@ -194,14 +199,37 @@ def test_strip_drift_does_not_depend_on_the_grid_offset():
     assert its <= _static(0.0, 0.0)[2], its
 
 
-def test_refused_where_a_term_or_a_load_factor_is_not_folded():
-    from pmpm.errors import ConfigError
+def test_damped_strip_is_accepted():
     damped = _strip_scene(0.0, 0.01, dynamic=True)
     damped["loads"]["damping"] = {"ratio": 0.02, "periods": [0.01, 0.002]}
-    with pytest.raises(ConfigError, match="edge_mass_ratio"):
-        Run(parse_scene(damped, "strip.toml"), write=False)
-    controlled = _strip_scene(0.0, 0.01)
-    controlled["solver"]["static"] = {"control": "displacement", "point": [0.0, TOP], "component": "x",
-                                      "displacement": 0.001}
-    with pytest.raises(ConfigError, match="edge_mass_ratio"):
-        Run(parse_scene(controlled, "strip.toml"), write=False)
+    Run(parse_scene(damped, "strip.toml"), write=False)   # (Rayleigh's term is folded)
+
+
+#: the face particle of the strip's top row (its stencil reaches the slaved node column x = -0.25)
+FACE = (-0.154, TOP)
+
+
+def test_displacement_control_with_slaved_nodes():
+    """A load-factor control ([solver.static] control = "displacement") on the strip with slaved
+    edge nodes: the pattern's forces and the controlled point's weights are folded. The point
+    (a particle on the face, whose stencil reaches the slaved column) moves by exactly the
+    displacement asked (the constraint c . u is linear and each correction meets it: round-off,
+    1e-9 relative, with the particle moved by the expanded increment), and the base shear is the
+    load factor times the pattern's 100 kN to Newton's tolerance (1e-6, as the load-controlled
+    strip's)."""
+    data = _strip_scene(0.0, 0.01)
+    data["solver"]["static"] = {"control": "displacement", "point": list(FACE), "component": "x",
+                                "displacement": 0.001}
+    run = Run(parse_scene(data, "strip.toml"), write=False)
+    run.execute()
+    s = run.solver
+    control = s.scheme.control
+    assert s.scheme.stats.get("slaved_nodes", 0) > 0
+    p = s.particles
+    k = int(np.flatnonzero(p["id"] == control.particle)[0])
+    assert abs(p["x0"][k, 0] - FACE[0]) < 0.01 and abs(p["x0"][k, 1] - FACE[1]) < 0.02   # the face particle
+    moved = float(p["x"][k, 0] - p["x0"][k, 0])
+    assert abs(moved / 0.001 - 1) < 1e-9, moved
+    names = run.structural.reaction_names
+    shear = -float(run.structural.rows[-1][2][names.index("base"), 0])
+    assert abs(shear / (control.load_factor * 1e5) - 1) < 1e-6, (shear, control.load_factor)

@@ -108,9 +108,11 @@ class LoadFactorControl:
             fixed[k] = 0.0
         return fixed, ref
 
-    def load_vectors(self, s, x, t):
+    def load_vectors(self, s, x, t, edges=None):
         """(f_fixed, f_ref) on the window (nx, ny, 2), halo-summed, from the particles at ``x``
-        (the step's start positions: dead loads)."""
+        (the step's start positions: dead loads); with slaved edge nodes (``edges``,
+        pmpm.core.implicit.edges) folded onto their targets before the halo sum, as the
+        scheme's external forces are."""
         p, w, g = s.particles, s.window, s.grid
         out = []
         for which in ("fixed", "pattern"):
@@ -125,6 +127,8 @@ class LoadFactorControl:
                 vec = self._vectors(loads, t)[0 if which == "fixed" else 1]
                 K.scatter_point_loads(idx, x, load_id, load_w, vec, *geometry)
             F = np.ascontiguousarray(T[..., FORCE])
+            if edges is not None:
+                edges.fold(F)
             s.decomp.sum_halo(F)
             out.append(F)
         return out[0], out[1]
@@ -152,7 +156,7 @@ class LoadFactorControl:
         converged one; ``problem.fext`` is left at the converged loads for the commit).
         Returns the iterations taken; raises NewtonFailed (nothing kept) when it fails."""
         self.lam0 = self.load_factor
-        fixed, ref = self.load_vectors(s, problem.x, t0 + h)
+        fixed, ref = self.load_vectors(s, problem.x, t0 + h, problem.edges)
         d = problem.dofs
         free = problem.free
         rf = d.owned_values(ref).copy()
@@ -298,7 +302,8 @@ class DisplacementControl(LoadFactorControl):
     def weights(self, problem):
         """The constraint's vector c (owned values): e . N_I(x_p) on the nodes of the point's
         stencil at the step's start position, so that c . u is the point's displacement
-        increment (the commit moves a particle by sum_I N_I(x_p) u_I)."""
+        increment (the commit moves a particle by sum_I N_I(x_p) u_I); with slaved edge nodes
+        the weights are folded (T^T c: the particle moves by the expanded increment T u)."""
         s = problem.s
         if self.particle is None:
             self.particle = self._find(s)
@@ -311,7 +316,7 @@ class DisplacementControl(LoadFactorControl):
         IK.scatter_inertia_and_gravity(x, np.ones(len(rows)), None, direction, T, w.ox, w.oy, g.origin, g.inv_h,
                                        g.cells[0], g.cells[1], s.shape)
         C = np.ascontiguousarray(T[..., FORCE])
-        s.decomp.sum_halo(C)
+        problem.fold_and_sum(C)
         c = problem.dofs.owned_values(C).copy()
         c[~problem.free] = 0.0
         return c

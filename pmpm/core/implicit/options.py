@@ -227,9 +227,6 @@ def check_implicit_scene(scene, materials):
             raise ConfigError(key, f"{why} (solver.integrator = \"implicit\")")
     if cfg.static is not None:
         _check_static(scene)
-        if cfg.implicit.get("edge_mass_ratio"):
-            raise ConfigError("solver.implicit.edge_mass_ratio", "not with a load factor control ([solver.static]) "
-                                                                 "yet: its pattern and point weights are not folded")
     for label, m in zip(scene.materials, materials):
         if not m.has_tangent:
             raise ConfigError(f"materials.{label}.type", f"{m.name} has no tangent for the implicit integrator yet")

@@ -131,10 +131,35 @@ class GridProblem:
         self.evaluate(u)
         R = np.zeros(self.mass.shape + (2,))
         IK.internal_force(self.x, self.vol, self.S, self.f, R, *self.geometry)
-        if self.edges is not None:   # before the halo sum: the fold stays in the particles' stencils
-            self.edges.fold(R)
-        self.s.decomp.sum_halo(R)
-        return R
+        return self.fold_and_sum(R)
+
+    def fold_and_sum(self, F):
+        """``F`` (a window array of forces the particles scattered, in place) folded onto the
+        slaved edge nodes' targets (T^T F) and halo-summed. The fold comes before the halo sum:
+        a slaved node and its targets are in the stencils of the particles that touch it
+        (pmpm.core.implicit.edges), so each rank folds its own particles' share inside its
+        window, and the sum then completes the targets. The effects' terms fold their
+        particles' forces here too (Rayleigh's viscous stress)."""
+        if self.edges is not None:
+            self.edges.fold(F)
+        self.s.decomp.sum_halo(F)
+        return F
+
+    def assemble(self, S, f, D):
+        """The tangent's blocks (rows of the step's unknowns, pmpm.core.implicit.kernels'
+        layout) of the particles' stresses ``S``, deformation gradients ``f`` and material
+        matrices ``D`` at the step's start positions, folded onto the slaved edge nodes
+        (T^T K T: assembled with rows for the slaved nodes too, then folded, then those rows
+        dropped). The material's tangent and the effects' terms (Rayleigh's a1 K_0) use it."""
+        d = self.dofs
+        span = d.span
+        lid, rows = (d.lid, d.n_local) if self.edges is None else self.edges.extended_lid(d.lid)
+        Kb = np.zeros((rows, span * span, 2, 2))
+        IK.assemble_blocks(self.x, self.vol, S, f, D, lid, Kb, *self.geometry)
+        if self.edges is not None:
+            self.edges.fold_tangent(Kb, lid, span)
+            Kb = Kb[:d.n_local]
+        return Kb
 
     def expand(self, W):
         """``W`` (a window array, in place) with the slaved edge nodes' values extrapolated from
@@ -181,15 +206,10 @@ class GridProblem:
             m.tangent(self.stress0, self.state0[k], self.S, self.state[k], self.E, self.D, p["mat"],
                       k if several else -1)
         span = d.span
-        lid, rows = (d.lid, d.n_local) if self.edges is None else self.edges.extended_lid(d.lid)
-        Kb = np.zeros((rows, span * span, 2, 2))
-        IK.assemble_blocks(self.x, self.vol, self.S, self.f, self.D, lid, Kb, *self.geometry)
-        if self.edges is not None:   # T^T K T (no terms with slaved nodes: the scheme refuses them)
-            self.edges.fold_tangent(Kb, lid, span)
-            Kb = Kb[:d.n_local]
+        Kb = self.assemble(self.S, self.f, self.D)   # (T^T K T with slaved edge nodes)
         if self.linear.kept_only:   # (before the terms: the diagonal of kept_diagonal's kind)
             self.linear.reference_diagonal = self._diagonal_of_D()
-        for term in self.terms:
+        for term in self.terms:   # (folded by the terms: ``assemble``, ``fold_and_sum``)
             term.add_tangent(self, u, Kb)
         if self.alpha:
             Kb *= 1.0 + self.alpha

@@ -91,8 +91,8 @@ class ImplicitNewmark:
             raise ConfigError(grid_fields.scene_key, "is explicit-only for now (solver.integrator = \"implicit\", "
                                          "docs/implicit.md)")
         if self.options.get("edge_mass_ratio"):
-            for effect in effects:   # their terms' forces and tangents are not folded yet
-                if type(effect).implicit_term is not Effect.implicit_term:
+            for effect in effects:   # a term whose forces and tangent are not folded onto the slaved nodes
+                if type(effect).implicit_term is not Effect.implicit_term and not effect.implicit_term_folded:
                     raise ConfigError("solver.implicit.edge_mass_ratio", f"not with {effect.name} yet (its implicit "
                                                                          f"term is not folded onto the slaved nodes)")
 
@@ -344,10 +344,11 @@ class ImplicitNewmark:
         if rule is not None:
             a_new = rule.acceleration(u, v, a)
             a_new = np.where(problem.dofs.active[..., None], a_new, 0.0)
-            a_new = problem.expand(a_new)
-            dv = problem.expand(rule.velocity_change(a, a_new))
+            dv = rule.velocity_change(a, a_new)
             for term in self.terms:   # the supports' own velocity change and acceleration
                 term.prescribe(s, t0, h, None, dv, a_new)
+            # (after the supports' values: a slaved edge node's targets may be driven nodes)
+            a_new, dv = problem.expand(a_new), problem.expand(dv)
             vmax, bad = IK.newmark_particles(p["x"], p["v"], p[ACCELERATION], u, dv, a_new, w.ox, w.oy,
                                              g.origin, g.inv_h, g.cells[0], g.cells[1], s.shape, dx)
             if self.terms:

@@ -14,9 +14,12 @@ each called at its place in the step (pmpm.core.implicit.scheme, .problem):
 * ``begin(problem)``: the step's equations are set up (start velocities, HHT's start forces);
   returns the term's force at the step's start (window array, halo-complete) or None;
 * ``add_residual(problem, u, R)``: add the term's nodal forces at the trial increment ``u`` to
-  ``R`` (window array, halo-complete: a force from the particles is halo-summed by the term);
+  ``R`` (window array, halo-complete: a force from the particles is folded onto the slaved
+  edge nodes and halo-summed by the term, ``problem.fold_and_sum``; the particles read the
+  expanded nodal values, ``problem.expand``);
 * ``add_tangent(problem, u, Kb)``: add -d(force)/du to the tangent's blocks ``Kb`` (the blocks of
-  pmpm.core.implicit.kernels.assemble_blocks: Kb[lid[I], offset(J - I)] 2 x 2);
+  pmpm.core.implicit.kernels.assemble_blocks: Kb[lid[I], offset(J - I)] 2 x 2; blocks from the
+  particles through ``problem.assemble``, which folds them, T^T C T);
 * ``commit(s, problem, u)``: the converged step: the term's state and its work (its energy
   terms).
 
