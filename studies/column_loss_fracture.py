@@ -168,7 +168,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cell", type=float, default=0.1, help="cell size (m)")
     ap.add_argument("--factors", type=float, nargs="+", default=[1, 2, 3, 4, 5, 6],
-                    help="floor load factors, in increasing order")
+                    help="floor load factors (increasing; any order with --all)")
     ap.add_argument("--eta", type=float, default=1.0, help="VGM fracture strain at T = 0 (illustrative)")
     ap.add_argument("--fracture-energy", type=float, default=1.0e5, help="G_f, J/m^2 (illustrative)")
     ap.add_argument("--end-time", type=float, default=None, help="override the case's end time (s)")
@@ -197,14 +197,18 @@ def main(argv=None):
         print(json.dumps(row), flush=True)
         if args.histories:   # after every factor: a cut session keeps what it ran
             save_histories(histories, rows, args.cell, args.histories)
-        if not row["arrested"] and collapse is None:
-            collapse = f
-            if not args.all:
-                break
+        if not row["arrested"] and not args.all:
+            break
+    rows.sort(key=lambda r: r["factor"])   # --all may run the factors in any order (bisection)
+    collapse = min((r["factor"] for r in rows if not r["arrested"]), default=None)
+    held = max((r["factor"] for r in rows if r["arrested"] and (collapse is None or r["factor"] < collapse)),
+               default=None)
     print(table(rows))
-    print(f"smallest factor at which the frame no longer arrests: {collapse if collapse is not None else 'none run'}")
+    print(f"smallest factor at which the frame no longer arrests: {collapse if collapse is not None else 'none run'}"
+          f" (largest below it that arrests: {held if held is not None else 'none run'})")
     out = {"column_loss_fracture": {"cell": args.cell, "eta": args.eta, "fracture_energy": args.fracture_energy,
-                                    "collapse_factor": collapse, "rows": rows}}
+                                    "collapse_factor": collapse,
+                                    "arrest_factor": held, "rows": rows}}
     print(json.dumps(out))
     if args.out:
         with open(args.out, "w") as fh:
