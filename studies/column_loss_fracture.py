@@ -89,15 +89,16 @@ def run_factor(h, factor, eta, fracture_energy, end_time=None, keep=None):
             keep["failed/" + body] = np.asarray(tab["failed"])
     failed = r.frames["damage"][-1] >= 1.0
     x0 = r.frames["x"][0][failed]
-    dist = np.abs(x0[:, 0] - REMOVED_X) if failed.any() else np.array([math.nan])
-    where = x0 if failed.any() else np.full((1, 2), math.nan)
+    dist = np.abs(x0[:, 0] - REMOVED_X)
+
+    def extent(a):   # (least, largest); NaN without a failed point
+        return (float(a.min()), float(a.max())) if len(a) else (math.nan, math.nan)
     return {"factor": factor, "peak_uy": s["peak_uy"], "t_peak": s["t_peak"], "end_uy": float(uy[-1]),
             "speed_arrest": s["arrested"], "grounded": landed, "arrested": s["arrested"] and not landed,
             "first_fracture": {k: float(v) for k, v in r.summary.get("first_fracture", {}).items()},
-            "failed_points": int(failed.sum()), "failed_nearest_m": float(np.nanmin(dist)),
-            "failed_farthest_m": float(np.nanmax(dist)),
-            "failed_x_m": [float(np.nanmin(where[:, 0])), float(np.nanmax(where[:, 0]))],
-            "failed_y_m": [float(np.nanmin(where[:, 1])), float(np.nanmax(where[:, 1]))],
+            "failed_points": int(failed.sum()), "failed_nearest_m": extent(dist)[0],
+            "failed_farthest_m": extent(dist)[1],
+            "failed_x_m": list(extent(x0[:, 0])), "failed_y_m": list(extent(x0[:, 1])),
             "fracture_work_J": float(r.energies["fracture_work"][-1]),
             "removed_particles": int(r.summary.get("removed", 0)), "wall_s": wall}
 
