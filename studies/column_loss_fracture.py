@@ -116,13 +116,22 @@ def table(rows):
     return "\n".join(lines)
 
 
-def plot(histories, rows, h, path):
-    """The sequence: the drop of the point above the removed column against time, one line per
-    load factor, each member's first fracture marked on it (the history's resolution) and the
-    ground's level drawn; ``histories`` maps a factor to :func:`run_factor`'s ``keep``."""
+def plot(panels, path):
+    """The sequence, one panel per cell size and eta: the drop of the point above the removed
+    column against time, one line per load factor, each member's first fracture marked on it and
+    the ground's level drawn. ``panels``: (cell size, eta, {factor: :func:`run_factor`'s
+    ``keep``}, rows)."""
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(8, 5.5), layout="constrained")
-    ax = fig.subplots()
+    fig = Figure(figsize=(8, 4.6 * len(panels)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
+    for ax, (h, eta, histories, rows) in zip(axes, panels):
+        _draw(ax, histories, rows, h, eta)
+    axes[-1].set_xlabel("time (s)")
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _draw(ax, histories, rows, h, eta):
     markers = {"beam": "o", "left column": "<", "right column": ">", "middle column": "s"}
     by_factor = {r["factor"]: r for r in rows}
     for factor in sorted(histories):
@@ -139,30 +148,28 @@ def plot(histories, rows, h, path):
         ax.plot([], [], markers.get(body, "x"), color="k", mfc="none", label=f"first fracture: {body}")
     ax.axhline(-BEAM_CLEARANCE, color="0.4", lw=0.8, ls="--", label="beam's bottom flange on the ground")
     ax.axvspan(0.08, 0.085, color="0.85")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("uy of the point above the removed column (m)")
-    ax.set_title(f"column loss up to fracture: floor load raised, {h:g} m cells")
+    ax.set_ylabel("uy above the removed column (m)")
+    what = "no failure (locus out of reach)" if eta is not None and eta >= 100 else f"void growth eta = {eta:g}"
+    ax.set_title(f"column loss, floor load raised: {h:g} m cells, {what}", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="lower left")
-    fig.savefig(path, dpi=110)
-    return path
 
 
-def save_histories(histories, rows, h, path):
+def save_histories(histories, rows, h, eta, path):
     """Keep the histories (and the rows, as JSON) in an .npz for :func:`plot` later."""
     flat = {f"{f:g}|{k}": v for f, d in histories.items() for k, v in d.items()}
-    np.savez(path, rows=json.dumps(rows), cell=h, **flat)
+    np.savez(path, rows=json.dumps(rows), cell=h, eta=eta, **flat)
 
 
 def load_histories(path):
-    """The histories, rows and cell size :func:`save_histories` kept."""
+    """The histories, rows, cell size and eta :func:`save_histories` kept."""
     z = np.load(path)
     histories = {}
     for key in z.files:
         if "|" in key:
             f, k = key.split("|", 1)
             histories.setdefault(float(f), {})[k] = z[key]
-    return histories, json.loads(str(z["rows"])), float(z["cell"])
+    return histories, json.loads(str(z["rows"])), float(z["cell"]), float(z["eta"])
 
 
 def main(argv=None):
@@ -178,16 +185,22 @@ def main(argv=None):
     ap.add_argument("--histories", default=None, help="keep the drop histories in this .npz")
     ap.add_argument("--plot", default=None, help="draw the sequence to this PNG")
     ap.add_argument("--replot", default=None, metavar="NPZ",
-                    help="draw --plot from a --histories file (several: comma-separated, merged) and exit")
+                    help="draw --plot from --histories files (comma-separated; merged per cell size and "
+                         "eta, one panel each) and exit")
     args = ap.parse_args(argv)
     if args.replot:
-        histories, rows, h = {}, [], None
+        cells = {}   # the files merged per (cell size, eta), one panel each, coarsest first
         for path in args.replot.split(","):
-            hs, rs, h = load_histories(path)
+            hs, rs, h, eta = load_histories(path)
+            histories, rows = cells.setdefault((h, eta), ({}, []))
             histories.update(hs)
             rows += rs
-        plot(histories, rows, h, args.plot)
-        print(table(sorted(rows, key=lambda r: r["factor"])))
+        order = sorted(cells, key=lambda k: (-k[0], k[1]))
+        for h, eta in order:
+            cells[h, eta][1].sort(key=lambda r: r["factor"])
+            print(f"{h:g} m cells, eta = {eta:g}:")
+            print(table(cells[h, eta][1]))
+        plot([(h, eta, *cells[h, eta]) for h, eta in order], args.plot)
         return
     rows, collapse, histories = [], None, {}
     for f in args.factors:
@@ -197,7 +210,7 @@ def main(argv=None):
         histories[f] = keep
         print(json.dumps(row), flush=True)
         if args.histories:   # after every factor: a cut session keeps what it ran
-            save_histories(histories, rows, args.cell, args.histories)
+            save_histories(histories, rows, args.cell, args.eta, args.histories)
         if not row["arrested"] and not args.all:
             break
     rows.sort(key=lambda r: r["factor"])   # --all may run the factors in any order (bisection)
@@ -215,7 +228,7 @@ def main(argv=None):
         with open(args.out, "w") as fh:
             json.dump(out, fh, indent=1)
     if args.plot:
-        plot(histories, rows, args.cell, args.plot)
+        plot([(args.cell, args.eta, histories, rows)], args.plot)
 
 
 if __name__ == "__main__":
